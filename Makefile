@@ -1,0 +1,40 @@
+# Thin wrapper: every target installs missing Debian packages first (scripts/deps.sh).
+BUILD      ?= build
+ASAN_BUILD ?= build-asan
+JOBS       ?= $(shell nproc)
+CMAKE      ?= cmake
+SCANCELL    = $(BUILD)/tools/scancell
+
+.PHONY: all deps build test test-asan demo bench clean
+
+all: build
+
+deps:
+	@bash scripts/deps.sh
+
+build: deps
+	@$(CMAKE) -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo > $(BUILD).configure.log 2>&1 || (cat $(BUILD).configure.log; exit 1)
+	@$(CMAKE) --build $(BUILD) -j$(JOBS)
+
+# All tests in the optimised build, then the planner tests again under ASan+UBSan.
+test: build
+	ctest --test-dir $(BUILD) --output-on-failure -j$(JOBS)
+	@$(MAKE) --no-print-directory test-asan
+
+test-asan: deps
+	@$(CMAKE) -S . -B $(ASAN_BUILD) -DCMAKE_BUILD_TYPE=Debug -DSCANCELL_SANITIZE=ON -DSCANCELL_BUILD_BENCH=OFF > $(ASAN_BUILD).configure.log 2>&1 || (cat $(ASAN_BUILD).configure.log; exit 1)
+	@$(CMAKE) --build $(ASAN_BUILD) -j$(JOBS) --target planner_tests
+	ctest --test-dir $(ASAN_BUILD) --output-on-failure -j$(JOBS) -L planner
+
+# Until the daemon exists: plan the bundled example object and print the plan summary.
+demo: build
+	$(SCANCELL) plan --mesh tests/data/mushroom.off --fit-mm 200 \
+	  --sensor config/sensors/line-scan-thesis.yaml --spec config/spec/thesis.yaml \
+	  --settings config/planner/default.yaml --out $(BUILD)/demo-plan.json
+	@echo "plan written to $(BUILD)/demo-plan.json"
+
+bench: build
+	$(BUILD)/bench/bench_planner
+
+clean:
+	rm -rf $(BUILD) $(ASAN_BUILD) $(BUILD).configure.log $(ASAN_BUILD).configure.log

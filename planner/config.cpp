@@ -1,0 +1,231 @@
+#include "planner/config.hpp"
+
+#include <cmath>
+#include <set>
+#include <sstream>
+
+#include <yaml-cpp/yaml.h>
+
+#include "planner/errors.hpp"
+
+namespace scancell::planner {
+namespace {
+
+/// A YAML mapping that knows its key path and which keys were read, so unknown keys can be refused.
+class Section {
+ public:
+  Section(YAML::Node node, std::string file, std::string path) : node_(std::move(node)), file_(std::move(file)), path_(std::move(path)) {
+    if (!node_.IsMap()) fail(path_.empty() ? "<root>" : path_, "must be a mapping");
+  }
+
+  [[noreturn]] void fail(const std::string& key, const std::string& why) const {
+    throw ConfigError(file_ + ": " + key + ": " + why);
+  }
+  std::string key_path(const std::string& key) const { return path_.empty() ? key : path_ + "." + key; }
+
+  bool has(const std::string& key) const { return static_cast<bool>(node_[key]); }
+
+  template <class T>
+  T get(const std::string& key) {
+    used_.insert(key);
+    const YAML::Node n = node_[key];
+    if (!n) fail(key_path(key), "missing");
+    return convert<T>(n, key);
+  }
+  template <class T>
+  T get_or(const std::string& key, T fallback) {
+    return has(key) ? get<T>(key) : fallback;
+  }
+  Section section(const std::string& key) {
+    used_.insert(key);
+    const YAML::Node n = node_[key];
+    if (!n) fail(key_path(key), "missing");
+    return Section(n, file_, key_path(key));
+  }
+  double positive(const std::string& key) {
+    const double v = get<double>(key);
+    if (!(v > 0.0)) fail(key_path(key), "must be > 0, got " + std::to_string(v));
+    return v;
+  }
+  double non_negative(const std::string& key, double fallback) {
+    const double v = get_or<double>(key, fallback);
+    if (!(v >= 0.0)) fail(key_path(key), "must be >= 0, got " + std::to_string(v));
+    return v;
+  }
+  /// Refuses keys nobody asked for: a typo must not silently fall back to a default.
+  void finish() const {
+    for (const auto& kv : node_) {
+      const std::string k = kv.first.as<std::string>();
+      if (!used_.count(k)) fail(key_path(k), "unknown key");
+    }
+  }
+
+ private:
+  template <class T>
+  T convert(const YAML::Node& n, const std::string& key) const {
+    try {
+      if constexpr (std::is_floating_point_v<T>) {
+        const T v = n.as<T>();
+        if (!std::isfinite(v)) fail(key_path(key), "must be a finite number");
+        return v;
+      } else {
+        return n.as<T>();
+      }
+    } catch (const YAML::Exception&) {
+      std::ostringstream os;
+      os << "cannot read '" << (n.IsScalar() ? n.Scalar() : std::string("<non-scalar>")) << "' as "
+         << (std::is_floating_point_v<T> ? "a number" : std::is_integral_v<T> ? "an integer" : "a string");
+      fail(key_path(key), os.str());
+    }
+  }
+
+  YAML::Node node_;
+  std::string file_, path_;
+  std::set<std::string> used_;
+};
+
+Section open_root(const std::filesystem::path& file, YAML::Node& holder) {
+  try {
+    holder = YAML::LoadFile(file.string());
+  } catch (const YAML::BadFile&) {
+    throw ConfigError(file.string() + ": cannot open file");
+  } catch (const YAML::Exception& e) {
+    throw ConfigError(file.string() + ": invalid YAML at line " + std::to_string(e.mark.line + 1) + ", column " +
+                      std::to_string(e.mark.column + 1) + ": " + e.msg);
+  }
+  if (!holder || holder.IsNull()) throw ConfigError(file.string() + ": file is empty");
+  return Section(holder, file.string(), "");
+}
+
+}  // namespace
+
+const char* to_string(SensorKind k) { return k == SensorKind::line_scan ? "line_scan" : "random_access"; }
+const char* to_string(ViewpointScheme s) { return s == ViewpointScheme::variable ? "variable" : "decoupled"; }
+const char* to_string(CoverMode m) { return m == CoverMode::greedy ? "greedy" : "constrained"; }
+
+void validate(const SensorModel& s, const std::string& w) {
+  auto bad = [&](const std::string& key, const std::string& why) { throw ConfigError(w + ": " + key + ": " + why); };
+  if (!(s.fov_x_rad > 0.0 && s.fov_x_rad < 3.0)) bad("fov_x_rad", "must be in (0, 3)");
+  if (s.kind == SensorKind::random_access && !(s.fov_y_rad > 0.0 && s.fov_y_rad < 3.0)) bad("fov_y_rad", "must be in (0, 3)");
+  if (!(s.range_min_mm > 0.0)) bad("range_min_mm", "must be > 0");
+  if (!(s.range_min_mm < s.range_max_mm)) bad("range_max_mm", "must be greater than range_min_mm");
+  if (!(s.optimal_standoff_mm >= s.range_min_mm && s.optimal_standoff_mm <= s.range_max_mm))
+    bad("optimal_standoff_mm", "must lie within [range_min_mm, range_max_mm]");
+  if (!(s.baseline_mm > 0.0)) bad("baseline_mm", "must be > 0");
+  if (s.samples_x < 2) bad("samples_x", "must be >= 2");
+  if (s.samples_y < 2) bad("samples_y", "must be >= 2");
+  if (s.kind == SensorKind::line_scan) {
+    if (!(s.scan_length_min_mm > 0.0)) bad("scan_length_min_mm", "must be > 0");
+    if (!(s.scan_length_min_mm <= s.scan_length_max_mm)) bad("scan_length_max_mm", "must be >= scan_length_min_mm");
+  }
+  if (!(s.noise_cz_per_mm > 0.0)) bad("noise.cz_per_mm", "must be > 0");
+  if (!(s.noise_cx >= 0.0)) bad("noise.cx", "must be >= 0");
+  if (!(s.noise_cy >= 0.0)) bad("noise.cy", "must be >= 0");
+  if (!(s.grazing_xz_rad > 0.0 && s.grazing_xz_rad <= 1.5707963267948966)) bad("grazing.t_xz_rad", "must be in (0, pi/2]");
+  if (!(s.grazing_yz_rad > 0.0 && s.grazing_yz_rad <= 1.5707963267948966)) bad("grazing.t_yz_rad", "must be in (0, pi/2]");
+}
+
+void validate(const ModelSpec& s, const std::string& w) {
+  auto bad = [&](const std::string& key, const std::string& why) { throw ConfigError(w + ": " + key + ": " + why); };
+  if (!(s.precision_mm > 0.0)) bad("precision_mm", "must be > 0");
+  if (!(s.density_per_mm2 > 0.0)) bad("density_per_mm2", "must be > 0");
+  if (!(s.coverage_goal > 0.0 && s.coverage_goal <= 1.0)) bad("coverage_goal", "must be in (0, 1]");
+}
+
+SensorModel load_sensor(const std::filesystem::path& file) {
+  YAML::Node root;
+  Section y = open_root(file, root);
+  SensorModel s;
+  s.name = y.get_or<std::string>("name", file.stem().string());
+  const std::string kind = y.get<std::string>("kind");
+  if (kind == "line_scan") s.kind = SensorKind::line_scan;
+  else if (kind == "random_access") s.kind = SensorKind::random_access;
+  else y.fail("kind", "must be line_scan or random_access, got '" + kind + "'");
+  s.fov_x_rad = y.positive("fov_x_rad");
+  if (s.kind == SensorKind::random_access) s.fov_y_rad = y.positive("fov_y_rad");
+  s.range_min_mm = y.positive("range_min_mm");
+  s.range_max_mm = y.positive("range_max_mm");
+  if (!(s.range_min_mm < s.range_max_mm)) y.fail("range_max_mm", "must be greater than range_min_mm");
+  s.optimal_standoff_mm = y.get_or<double>("optimal_standoff_mm", s.range_min_mm);
+  s.baseline_mm = y.positive("baseline_mm");
+  if (s.kind == SensorKind::line_scan) {
+    s.scan_length_min_mm = y.positive("scan_length_min_mm");
+    s.scan_length_max_mm = y.positive("scan_length_max_mm");
+  }
+  s.samples_x = y.get<int>("samples_x");
+  s.samples_y = y.get<int>("samples_y");
+  {
+    Section n = y.section("noise");
+    s.noise_cx = n.non_negative("cx", 0.0);
+    s.noise_cy = n.non_negative("cy", 0.0);
+    s.noise_cz_per_mm = n.positive("cz_per_mm");
+    n.finish();
+  }
+  {
+    Section g = y.section("grazing");
+    s.grazing_xz_rad = g.positive("t_xz_rad");
+    s.grazing_yz_rad = g.positive("t_yz_rad");
+    g.finish();
+  }
+  y.finish();
+  validate(s, file.string());
+  return s;
+}
+
+ModelSpec load_spec(const std::filesystem::path& file) {
+  YAML::Node root;
+  Section y = open_root(file, root);
+  ModelSpec s;
+  s.name = y.get_or<std::string>("name", file.stem().string());
+  s.precision_mm = y.positive("precision_mm");
+  s.density_per_mm2 = y.positive("density_per_mm2");
+  s.coverage_goal = y.get_or<double>("coverage_goal", 1.0);
+  y.finish();
+  validate(s, file.string());
+  return s;
+}
+
+PlannerSettings load_planner_settings(const std::filesystem::path& file) {
+  YAML::Node root;
+  Section y = open_root(file, root);
+  PlannerSettings p;
+  p.seed = y.get_or<std::uint64_t>("seed", p.seed);
+  if (y.has("viewpoints")) {
+    Section v = y.section("viewpoints");
+    auto& vs = p.viewpoints;
+    const std::string scheme = v.get_or<std::string>("scheme", to_string(vs.scheme));
+    if (scheme == "variable") vs.scheme = ViewpointScheme::variable;
+    else if (scheme == "decoupled") vs.scheme = ViewpointScheme::decoupled;
+    else v.fail(v.key_path("scheme"), "must be variable or decoupled, got '" + scheme + "'");
+    vs.standoff_factor = v.get_or<double>("standoff_factor", vs.standoff_factor);
+    if (!(vs.standoff_factor >= 1.0 && vs.standoff_factor <= 2.0)) v.fail(v.key_path("standoff_factor"), "must be in [1, 2]");
+    vs.position_decimation = v.get_or<int>("position_decimation", vs.position_decimation);
+    if (vs.position_decimation < 1) v.fail(v.key_path("position_decimation"), "must be >= 1");
+    vs.twist_levels = v.get_or<int>("twist_levels", vs.twist_levels);
+    if (vs.twist_levels < 1 || vs.twist_levels > 360) v.fail(v.key_path("twist_levels"), "must be in [1, 360]");
+    vs.standoff_adjust_max_mm = v.non_negative("standoff_adjust_max_mm", vs.standoff_adjust_max_mm);
+    vs.scan_length_design_incidence_rad = v.non_negative("scan_length_design_incidence_rad", vs.scan_length_design_incidence_rad);
+    if (!(vs.scan_length_design_incidence_rad < 1.5)) v.fail(v.key_path("scan_length_design_incidence_rad"), "must be < 1.5");
+    vs.clearance_mm = v.non_negative("clearance_mm", vs.clearance_mm);
+    v.finish();
+  }
+  if (y.has("cover")) {
+    Section c = y.section("cover");
+    const std::string mode = c.get_or<std::string>("mode", to_string(p.cover.mode));
+    if (mode == "greedy") p.cover.mode = CoverMode::greedy;
+    else if (mode == "constrained") p.cover.mode = CoverMode::constrained;
+    else c.fail(c.key_path("mode"), "must be greedy or constrained, got '" + mode + "'");
+    p.cover.registration_threshold = c.non_negative("registration_threshold", p.cover.registration_threshold);
+    if (!(p.cover.registration_threshold <= 1.0)) c.fail(c.key_path("registration_threshold"), "must be in [0, 1]");
+    c.finish();
+  }
+  if (y.has("matrix")) {
+    Section m = y.section("matrix");
+    p.matrix.ray_offset_mm = m.non_negative("ray_offset_mm", p.matrix.ray_offset_mm);
+    m.finish();
+  }
+  y.finish();
+  return p;
+}
+
+}  // namespace scancell::planner

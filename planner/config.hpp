@@ -1,0 +1,33 @@
+#pragma once
+// YAML configuration of the sensor, the model specification and the planner settings. Every key carries its
+// unit in its name; a missing, unknown, malformed or out-of-range key is refused with "file: key.path: why".
+#include <cstdint>
+#include <filesystem>
+#include <string>
+
+#include "planner/cover.hpp"
+#include "planner/sensor.hpp"
+#include "planner/viewpoint.hpp"
+
+namespace scancell::planner {
+
+struct PlannerSettings {
+  ViewpointSettings viewpoints;
+  CoverSettings cover;
+  MatrixSettings matrix;
+  std::uint64_t seed = 1;
+};
+
+SensorModel load_sensor(const std::filesystem::path& file);
+ModelSpec load_spec(const std::filesystem::path& file);
+PlannerSettings load_planner_settings(const std::filesystem::path& file);
+
+/// The same checks load_* apply, for models built in code; throws ConfigError naming the key.
+void validate(const SensorModel& sensor, const std::string& where = "sensor");
+void validate(const ModelSpec& spec, const std::string& where = "spec");
+
+const char* to_string(SensorKind k);
+const char* to_string(ViewpointScheme s);
+const char* to_string(CoverMode m);
+
+}  // namespace scancell::planner

@@ -1,0 +1,155 @@
+#include "planner/cover.hpp"
+
+#include <algorithm>
+#include <numeric>
+#include <queue>
+#include <stdexcept>
+
+namespace scancell::planner {
+namespace {
+
+struct Entry {
+  double gain;       // upper bound (stale) or exact (fresh) newly covered weight
+  std::uint32_t col;
+  std::uint32_t stamp;  // number of views chosen when the gain was computed
+  bool operator<(const Entry& o) const {  // max-heap on gain, ties to the lower column index
+    if (gain != o.gain) return gain < o.gain;
+    return col > o.col;
+  }
+};
+
+struct UnionFind {
+  std::vector<std::uint32_t> p;
+  explicit UnionFind(std::size_t n) : p(n) { std::iota(p.begin(), p.end(), 0u); }
+  std::uint32_t find(std::uint32_t x) {
+    while (p[x] != x) x = p[x] = p[p[x]];
+    return x;
+  }
+  void unite(std::uint32_t a, std::uint32_t b) { p[find(a)] = find(b); }
+};
+
+}  // namespace
+
+double viewpoint_correlation(const MeasurabilityColumn& a, const MeasurabilityColumn& b, std::uint32_t m_s) {
+  if (m_s == 0) return 0.0;
+  const MeasurabilityColumn& small = a.count() <= b.count() ? a : b;
+  const MeasurabilityColumn& large = a.count() <= b.count() ? b : a;
+  std::uint32_t shared = 0;
+  small.for_each([&](std::uint32_t r) { shared += large.contains(r); });
+  return static_cast<double>(shared) / m_s;
+}
+
+CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>& w, const CoverSettings& st) {
+  if (w.size() != m.n_rows) throw std::invalid_argument("greedy_cover: one weight per row required");
+  CoverResult res;
+  const double total = std::accumulate(w.begin(), w.end(), 0.0);
+  res.unmeasurable_rows = m.unmeasurable_rows();
+  double unmeasurable_w = 0.0;
+  for (auto r : res.unmeasurable_rows) unmeasurable_w += w[r];
+  res.measurable_fraction = total > 0 ? (total - unmeasurable_w) / total : 0.0;
+  for (const auto& c : m.columns) res.max_column_count = std::max(res.max_column_count, c.count());
+
+  std::vector<char> covered(m.n_rows, 0);
+  std::vector<char> chosen(m.n_cols(), 0);
+  double covered_w = 0.0;
+  std::size_t covered_n = 0;
+  const bool constrained = st.mode == CoverMode::constrained;
+  // Overlap (shared rows) of every candidate with the views chosen so far: a candidate is registrable once
+  // its overlap with some single chosen view reaches t_r · m_S.
+  std::vector<char> registrable(m.n_cols(), constrained ? 0 : 1);
+  const double overlap_needed = st.registration_threshold * res.max_column_count;
+  // Row -> columns index, needed to update registrability after each choice.
+  std::vector<std::vector<std::uint32_t>> row_cols;
+  if (constrained) {
+    row_cols.resize(m.n_rows);
+    for (std::uint32_t j = 0; j < m.n_cols(); ++j) m.columns[j].for_each([&](std::uint32_t r) { row_cols[r].push_back(j); });
+  }
+
+  auto gain_of = [&](std::uint32_t j) {
+    double g = 0.0;
+    m.columns[j].for_each([&](std::uint32_t r) {
+      if (!covered[r]) g += w[r];
+    });
+    return g;
+  };
+
+  std::priority_queue<Entry> heap;
+  for (std::uint32_t j = 0; j < m.n_cols(); ++j) {
+    const double g = gain_of(j);
+    if (g > 0.0) heap.push({g, j, 0});
+  }
+  std::vector<Entry> waiting;  // fresh-best candidates that cannot register yet
+  std::vector<std::uint32_t> overlap(constrained ? m.n_cols() : 0, 0);
+
+  res.stop_reason = "no candidate adds coverage";
+  while (true) {
+    if (total > 0 && covered_w / total >= st.coverage_goal - 1e-12) {
+      res.stop_reason = "coverage goal reached";
+      break;
+    }
+    const std::uint32_t stamp = static_cast<std::uint32_t>(res.views.size());
+    bool picked = false;
+    while (!heap.empty()) {
+      Entry e = heap.top();
+      heap.pop();
+      if (e.stamp != stamp) {  // stale: recompute, gains only shrink
+        e.gain = gain_of(e.col);
+        e.stamp = stamp;
+        if (e.gain > 0.0) heap.push(e);
+        continue;
+      }
+      if (!res.views.empty() && !registrable[e.col]) {
+        ++res.blocked_by_registration;
+        waiting.push_back(e);
+        continue;
+      }
+      // Select e.col.
+      chosen[e.col] = 1;
+      res.views.push_back(e.col);
+      res.gain_weight.push_back(e.gain);
+      m.columns[e.col].for_each([&](std::uint32_t r) {
+        if (!covered[r]) {
+          covered[r] = 1;
+          covered_w += w[r];
+          ++covered_n;
+        }
+      });
+      res.cumulative_fraction.push_back(total > 0 ? covered_w / total : 0.0);
+      res.cumulative_point_fraction.push_back(m.n_rows ? static_cast<double>(covered_n) / m.n_rows : 0.0);
+      if (constrained) {
+        // Overlap with this one view only (eq. 4.2 is pairwise), recounted per new view.
+        std::fill(overlap.begin(), overlap.end(), 0u);
+        m.columns[e.col].for_each([&](std::uint32_t r) {
+          for (auto j : row_cols[r]) ++overlap[j];
+        });
+        for (std::uint32_t j = 0; j < m.n_cols(); ++j)
+          if (overlap[j] > 0 && overlap[j] >= overlap_needed) registrable[j] = 1;
+        // Waiting candidates return to the heap; their gains are now stale upper bounds.
+        for (auto& wentry : waiting) heap.push(wentry);
+        waiting.clear();
+      }
+      picked = true;
+      break;
+    }
+    if (!picked) {
+      if (!waiting.empty()) res.stop_reason = "remaining gain needs views that cannot register (t_r)";
+      break;
+    }
+  }
+
+  // Registration graph G_r over the chosen views (thesis 4.2.5).
+  const std::size_t n = res.views.size();
+  UnionFind uf(n);
+  for (std::uint32_t a = 0; a < n; ++a)
+    for (std::uint32_t b = a + 1; b < n; ++b) {
+      const double s = viewpoint_correlation(m.columns[res.views[a]], m.columns[res.views[b]], res.max_column_count);
+      if (s >= st.registration_threshold && s > 0.0) {
+        res.registration_edges.push_back({a, b, s});
+        uf.unite(a, b);
+      }
+    }
+  for (std::uint32_t a = 0; a < n; ++a) res.registration_components += uf.find(a) == a;
+  return res;
+}
+
+}  // namespace scancell::planner

@@ -1,0 +1,19 @@
+#pragma once
+// Errors raised on bad input. Each names what was wrong and where (file, element, key path),
+// so the command line can print it and exit non-zero without a crash.
+#include <stdexcept>
+#include <string>
+
+namespace scancell::planner {
+
+/// A mesh file that cannot be used: unreadable, malformed, or without usable triangles.
+struct MeshError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+/// A configuration file or value that is missing, malformed or out of range; the message carries the key path.
+struct ConfigError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+}  // namespace scancell::planner

@@ -1,0 +1,46 @@
+#pragma once
+// Indexed triangle meshes: loading (assimp) with strict validation, scaling, welding.
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+namespace scancell::planner {
+
+using Triangle = std::array<std::uint32_t, 3>;
+
+struct TriangleMesh {
+  std::vector<Eigen::Vector3d> vertices;  // mm once scaled
+  std::vector<Triangle> triangles;
+};
+
+struct MeshLoadReport {
+  std::size_t file_vertices = 0;        // as read, before welding
+  std::size_t file_faces = 0;
+  std::size_t degenerate_dropped = 0;   // zero-area or repeated-index triangles
+  std::size_t unreferenced_vertices = 0;
+};
+
+/// Reads OFF, PLY, OBJ or STL through assimp. Throws MeshError naming the file and the offending element for
+/// empty or unparseable files, non-finite coordinates, out-of-range indices and meshes without usable
+/// triangles. Degenerate triangles are dropped and counted in the report.
+TriangleMesh load_mesh(const std::filesystem::path& path, MeshLoadReport* report = nullptr);
+
+/// Validates an in-memory mesh with the same rules (name is used in messages); drops degenerate triangles.
+void validate_mesh(TriangleMesh& mesh, const std::string& name, MeshLoadReport* report = nullptr);
+
+/// Axis-aligned bounding box extent (max - min).
+Eigen::Vector3d bounding_extent(const TriangleMesh& mesh);
+
+/// Scale factor that makes the longest bounding-box side equal to longest_side_mm.
+double fit_scale(const TriangleMesh& mesh, double longest_side_mm);
+
+void apply_scale(TriangleMesh& mesh, double scale);
+
+double triangle_area(const TriangleMesh& mesh, const Triangle& t);
+
+}  // namespace scancell::planner

@@ -1,0 +1,174 @@
+#include "planner/mesh.hpp"
+
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <sstream>
+#include <unordered_map>
+
+#include <assimp/Importer.hpp>
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+
+#include "planner/errors.hpp"
+
+namespace scancell::planner {
+namespace {
+
+struct Vec3Hash {
+  std::size_t operator()(const Eigen::Vector3d& v) const noexcept {
+    std::size_t h = 1469598103934665603ull;
+    for (int i = 0; i < 3; ++i) {
+      double d = v[i] == 0.0 ? 0.0 : v[i];  // fold -0 into +0
+      std::uint64_t bits;
+      static_assert(sizeof bits == sizeof d);
+      std::memcpy(&bits, &d, sizeof d);
+      h = (h ^ bits) * 1099511628211ull;
+    }
+    return h;
+  }
+};
+
+}  // namespace
+
+TriangleMesh load_mesh(const std::filesystem::path& path, MeshLoadReport* report) {
+  const std::string name = path.string();
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec))
+    throw MeshError(name + ": no such mesh file");
+  if (std::filesystem::file_size(path, ec) == 0)
+    throw MeshError(name + ": file is empty");
+
+  Assimp::Importer importer;
+  // No aiProcess_FindDegenerates / FindInvalidData: we report what was wrong ourselves rather than let the
+  // importer repair silently. PreTransformVertices bakes node transforms so multi-node files stay correct.
+  const aiScene* scene = importer.ReadFile(
+      name, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_PreTransformVertices |
+                aiProcess_ValidateDataStructure | aiProcess_SortByPType);
+  if (!scene) throw MeshError(name + ": cannot parse mesh: " + importer.GetErrorString());
+  if (scene->mNumMeshes == 0) throw MeshError(name + ": file holds no mesh");
+
+  TriangleMesh mesh;
+  MeshLoadReport local;
+  // Weld across assimp meshes (STL solids, OBJ groups) so the surface stays connected.
+  std::unordered_map<Eigen::Vector3d, std::uint32_t, Vec3Hash> index_of;
+  for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
+    const aiMesh* am = scene->mMeshes[m];
+    local.file_vertices += am->mNumVertices;
+    std::vector<std::uint32_t> remap(am->mNumVertices);
+    for (unsigned v = 0; v < am->mNumVertices; ++v) {
+      const aiVector3D& a = am->mVertices[v];
+      const Eigen::Vector3d p(a.x, a.y, a.z);
+      if (!p.allFinite()) {
+        std::ostringstream os;
+        os << name << ": mesh " << m << " vertex " << v << " has a non-finite coordinate (" << a.x << ", "
+           << a.y << ", " << a.z << ")";
+        throw MeshError(os.str());
+      }
+      auto [it, inserted] = index_of.emplace(p, static_cast<std::uint32_t>(mesh.vertices.size()));
+      if (inserted) mesh.vertices.push_back(p);
+      remap[v] = it->second;
+    }
+    for (unsigned f = 0; f < am->mNumFaces; ++f) {
+      const aiFace& face = am->mFaces[f];
+      ++local.file_faces;
+      if (face.mNumIndices != 3) continue;  // points and lines (sorted out by SortByPType) are not surface
+      Triangle t;
+      for (int k = 0; k < 3; ++k) {
+        const unsigned idx = face.mIndices[k];
+        if (idx >= am->mNumVertices) {
+          std::ostringstream os;
+          os << name << ": mesh " << m << " face " << f << " index " << idx << " is out of range (" << am->mNumVertices
+             << " vertices)";
+          throw MeshError(os.str());
+        }
+        t[k] = remap[idx];
+      }
+      mesh.triangles.push_back(t);
+    }
+  }
+  validate_mesh(mesh, name, &local);
+  if (report) *report = local;
+  return mesh;
+}
+
+void validate_mesh(TriangleMesh& mesh, const std::string& name, MeshLoadReport* report) {
+  MeshLoadReport local;
+  MeshLoadReport& r = report ? *report : local;
+  for (std::size_t v = 0; v < mesh.vertices.size(); ++v) {
+    if (!mesh.vertices[v].allFinite()) {
+      std::ostringstream os;
+      os << name << ": vertex " << v << " has a non-finite coordinate";
+      throw MeshError(os.str());
+    }
+  }
+  std::vector<Triangle> kept;
+  kept.reserve(mesh.triangles.size());
+  std::vector<char> used(mesh.vertices.size(), 0);
+  for (std::size_t f = 0; f < mesh.triangles.size(); ++f) {
+    const Triangle& t = mesh.triangles[f];
+    for (int k = 0; k < 3; ++k) {
+      if (t[k] >= mesh.vertices.size()) {
+        std::ostringstream os;
+        os << name << ": face " << f << " index " << t[k] << " is out of range (" << mesh.vertices.size()
+           << " vertices)";
+        throw MeshError(os.str());
+      }
+    }
+    if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2] || !(triangle_area(mesh, t) > 0.0)) {
+      ++r.degenerate_dropped;
+      continue;
+    }
+    kept.push_back(t);
+    for (auto i : t) used[i] = 1;
+  }
+  if (kept.empty()) {
+    std::ostringstream os;
+    os << name << ": no usable triangles (" << mesh.triangles.size() << " faces, " << r.degenerate_dropped
+       << " degenerate)";
+    throw MeshError(os.str());
+  }
+  mesh.triangles = std::move(kept);
+  // Compact away vertices no triangle uses: they are not surface and would become rows nothing can cover.
+  std::vector<std::uint32_t> remap(mesh.vertices.size(), UINT32_MAX);
+  std::vector<Eigen::Vector3d> verts;
+  verts.reserve(mesh.vertices.size());
+  for (std::size_t v = 0; v < mesh.vertices.size(); ++v) {
+    if (!used[v]) {
+      ++r.unreferenced_vertices;
+      continue;
+    }
+    remap[v] = static_cast<std::uint32_t>(verts.size());
+    verts.push_back(mesh.vertices[v]);
+  }
+  for (auto& t : mesh.triangles)
+    for (auto& i : t) i = remap[i];
+  mesh.vertices = std::move(verts);
+}
+
+Eigen::Vector3d bounding_extent(const TriangleMesh& mesh) {
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
+  Eigen::Vector3d hi = -lo;
+  for (const auto& v : mesh.vertices) {
+    lo = lo.cwiseMin(v);
+    hi = hi.cwiseMax(v);
+  }
+  return mesh.vertices.empty() ? Eigen::Vector3d::Zero() : Eigen::Vector3d(hi - lo);
+}
+
+double fit_scale(const TriangleMesh& mesh, double longest_side_mm) {
+  const double longest = bounding_extent(mesh).maxCoeff();
+  if (!(longest > 0.0)) throw MeshError("mesh has zero extent; cannot fit it to a size");
+  return longest_side_mm / longest;
+}
+
+void apply_scale(TriangleMesh& mesh, double scale) {
+  for (auto& v : mesh.vertices) v *= scale;
+}
+
+double triangle_area(const TriangleMesh& mesh, const Triangle& t) {
+  const Eigen::Vector3d& a = mesh.vertices[t[0]];
+  return 0.5 * (mesh.vertices[t[1]] - a).cross(mesh.vertices[t[2]] - a).norm();
+}
+
+}  // namespace scancell::planner

@@ -1,0 +1,213 @@
+#include "planner/plan.hpp"
+
+#include <chrono>
+#include <cstdio>
+#include <numbers>
+#include <sstream>
+
+#include <tbb/global_control.h>
+#include <tbb/info.h>
+#include <tbb/task_arena.h>
+
+namespace scancell::planner {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+nlohmann::json vec(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
+
+}  // namespace
+
+ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const ModelSpec& spec,
+                    const PlannerSettings& settings, const RoughModelOptions& rough_options, int threads) {
+  validate(sensor);
+  validate(spec);
+  ViewPlan p;
+  p.sensor = sensor;
+  p.spec = spec;
+  p.settings = settings;
+  p.settings.cover.coverage_goal = spec.coverage_goal;
+  p.rough_options = rough_options;
+  p.threads = threads > 0 ? threads : tbb::info::default_concurrency();
+  tbb::task_arena arena(p.threads);
+  arena.execute([&] {
+    auto t = Clock::now();
+    p.rough = build_rough_model(std::move(object_mm), rough_options, &p.rough_report);
+    p.times.rough_model_s = since(t);
+
+    t = Clock::now();
+    const OcclusionScene scene(p.rough.mesh());
+    p.times.scene_s = since(t);
+
+    t = Clock::now();
+    const auto candidates = generate_viewpoints(p.rough, scene, sensor, spec, settings.viewpoints, &p.generation);
+    p.candidates = candidates.size();
+    p.times.viewpoints_s = since(t);
+
+    t = Clock::now();
+    const auto matrix = build_measurability(p.rough, scene, sensor, spec, candidates, settings.matrix, &p.matrix_stats);
+    p.matrix_density = matrix.density();
+    p.matrix_bytes = matrix.memory_bytes();
+    p.times.matrix_s = since(t);
+
+    t = Clock::now();
+    p.cover = greedy_cover(matrix, p.rough.area_mm2, p.settings.cover);
+    for (auto j : p.cover.views) p.views.push_back(candidates[j]);
+    p.times.cover_s = since(t);
+  });
+  return p;
+}
+
+nlohmann::json plan_to_json(const ViewPlan& p) {
+  using nlohmann::json;
+  json j;
+  j["format"] = "scancell-plan";
+  j["version"] = 1;
+  j["units"] = {{"length", "mm"}, {"angle", "rad"}, {"density", "samples/mm^2"}, {"time", "s"}};
+  j["camera_frame"] =
+      "x along the laser fan, y along the sweep and baseline (receiver at +y), boresight -z; transform maps camera "
+      "to object coordinates";
+  const SensorModel& s = p.sensor;
+  j["sensor"] = {{"name", s.name},
+                 {"kind", to_string(s.kind)},
+                 {"fov_x_rad", s.fov_x_rad},
+                 {"fov_y_rad", s.fov_y_rad},
+                 {"scan_length_min_mm", s.scan_length_min_mm},
+                 {"scan_length_max_mm", s.scan_length_max_mm},
+                 {"range_min_mm", s.range_min_mm},
+                 {"range_max_mm", s.range_max_mm},
+                 {"optimal_standoff_mm", s.optimal_standoff_mm},
+                 {"baseline_mm", s.baseline_mm},
+                 {"samples_x", s.samples_x},
+                 {"samples_y", s.samples_y},
+                 {"noise", {{"cx", s.noise_cx}, {"cy", s.noise_cy}, {"cz_per_mm", s.noise_cz_per_mm}}},
+                 {"grazing", {{"t_xz_rad", s.grazing_xz_rad}, {"t_yz_rad", s.grazing_yz_rad}}}};
+  j["spec"] = {{"name", p.spec.name},
+               {"precision_mm", p.spec.precision_mm},
+               {"density_per_mm2", p.spec.density_per_mm2},
+               {"coverage_goal", p.spec.coverage_goal}};
+  const auto& vs = p.settings.viewpoints;
+  j["settings"] = {{"seed", p.settings.seed},
+                   {"viewpoints",
+                    {{"scheme", to_string(vs.scheme)},
+                     {"standoff_factor", vs.standoff_factor},
+                     {"position_decimation", vs.position_decimation},
+                     {"twist_levels", vs.twist_levels},
+                     {"standoff_adjust_max_mm", vs.standoff_adjust_max_mm},
+                     {"scan_length_design_incidence_rad", vs.scan_length_design_incidence_rad},
+                     {"clearance_mm", vs.clearance_mm}}},
+                   {"cover",
+                    {{"mode", to_string(p.settings.cover.mode)},
+                     {"registration_threshold", p.settings.cover.registration_threshold}}},
+                   {"matrix", {{"ray_offset_mm", p.settings.matrix.ray_offset_mm}}}};
+  Eigen::Matrix4d obj = Eigen::Matrix4d::Identity();
+  obj.topLeftCorner<3, 3>() *= p.object.scale;
+  json objt = json::array();
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) objt.push_back(obj(r, c));
+  j["object"] = {{"mesh", p.object.mesh_path},
+                 {"scale", p.object.scale},
+                 {"transform_row_major", objt},
+                 {"note", "plan coordinates = mesh coordinates transformed by transform_row_major"},
+                 {"file_vertices", p.object.load.file_vertices},
+                 {"file_faces", p.object.load.file_faces},
+                 {"degenerate_faces_dropped", p.object.load.degenerate_dropped}};
+  json rough = {{"vertices", p.rough.size()},
+                {"triangles", p.rough.triangles.size()},
+                {"area_mm2", p.rough.total_area_mm2},
+                {"input_vertices", p.rough_report.input_vertices},
+                {"decimated", p.rough_report.decimated},
+                {"normal_noise_mm", p.rough_options.normal_noise_mm}};
+  if (p.rough_options.target_vertices) rough["target_vertices"] = *p.rough_options.target_vertices;
+  if (p.rough_options.rho_rel) rough["rho_rel"] = *p.rough_options.rho_rel;
+  j["rough_model"] = rough;
+
+  json views = json::array();
+  for (std::size_t k = 0; k < p.views.size(); ++k) {
+    const Viewpoint& v = p.views[k];
+    const Eigen::Matrix4d t = v.transform();
+    json tm = json::array();
+    for (int r = 0; r < 4; ++r)
+      for (int c = 0; c < 4; ++c) tm.push_back(t(r, c));
+    views.push_back({{"index", k},
+                     {"camera_to_object_row_major", tm},
+                     {"position_mm", vec(v.position)},
+                     {"boresight", vec(v.axis)},
+                     {"twist_rad", v.twist_rad},
+                     {"standoff_mm", v.standoff_mm},
+                     {"scan_length_mm", v.scan_length_mm},
+                     {"target_row", v.target_row},
+                     {"twist_level", v.twist_level},
+                     {"estimated_gain_area_mm2", p.cover.gain_weight[k]},
+                     {"cumulative_estimated_measurability", p.cover.cumulative_fraction[k]},
+                     {"cumulative_point_fraction", p.cover.cumulative_point_fraction[k]}});
+  }
+  j["views"] = views;
+  json edges = json::array();
+  for (const auto& e : p.cover.registration_edges) edges.push_back({{"a", e.a}, {"b", e.b}, {"sigma", e.sigma}});
+  const double est = p.cover.cumulative_fraction.empty() ? 0.0 : p.cover.cumulative_fraction.back();
+  const double pts = p.cover.cumulative_point_fraction.empty() ? 0.0 : p.cover.cumulative_point_fraction.back();
+  j["summary"] = {
+      {"rows_s", p.rough.size()},
+      {"candidates_v", p.candidates},
+      {"viewpoint_positions", p.generation.positions},
+      {"candidates_dropped_inside", p.generation.dropped_inside},
+      {"candidates_dropped_clearance", p.generation.dropped_clearance},
+      {"matrix_density", p.matrix_density},
+      {"matrix_bytes", p.matrix_bytes},
+      {"pairs_surviving_culling", p.matrix_stats.pairs_surviving},
+      {"rays_cast", p.matrix_stats.rays_cast},
+      {"views", p.views.size()},
+      {"estimated_measurability", est},
+      {"estimated_point_fraction", pts},
+      {"measurable_fraction", p.cover.measurable_fraction},
+      {"unmeasurable_rows", p.cover.unmeasurable_rows.size()},
+      {"stop_reason", p.cover.stop_reason},
+      {"registration",
+       {{"threshold", p.settings.cover.registration_threshold},
+        {"m_s", p.cover.max_column_count},
+        {"components", p.cover.registration_components},
+        {"connected", p.cover.registration_components <= 1},
+        {"edges", edges}}},
+      {"times_s",
+       {{"rough_model", p.times.rough_model_s},
+        {"scene", p.times.scene_s},
+        {"viewpoints", p.times.viewpoints_s},
+        {"matrix", p.times.matrix_s},
+        {"cover", p.times.cover_s},
+        {"total", p.times.total_s()}}},
+      {"threads", p.threads}};
+  return j;
+}
+
+std::string plan_summary(const ViewPlan& p) {
+  std::ostringstream os;
+  char buf[256];
+  const double est = p.cover.cumulative_fraction.empty() ? 0.0 : p.cover.cumulative_fraction.back();
+  std::snprintf(buf, sizeof buf, "rough model: %zu vertices (%.0f mm2), candidates: %zu from %zu positions, matrix density %.4f\n",
+                p.rough.size(), p.rough.total_area_mm2, p.candidates, p.generation.positions, p.matrix_density);
+  os << buf;
+  os << " view  standoff_mm  scan_mm  twist_deg  gain_mm2   est_measurability\n";
+  for (std::size_t k = 0; k < p.views.size(); ++k) {
+    const auto& v = p.views[k];
+    std::snprintf(buf, sizeof buf, " %4zu  %11.1f  %7.1f  %9.1f  %8.1f   %.4f\n", k, v.standoff_mm, v.scan_length_mm,
+                  v.twist_rad * 180.0 / std::numbers::pi, p.cover.gain_weight[k], p.cover.cumulative_fraction[k]);
+    os << buf;
+  }
+  std::snprintf(buf, sizeof buf,
+                "views: %zu  estimated measurability: %.4f (area)  reachable: %.4f  unmeasurable rows: %zu  "
+                "registration: %s (%zu components, t_r %.2f)\n",
+                p.views.size(), est, p.cover.measurable_fraction, p.cover.unmeasurable_rows.size(),
+                p.cover.registration_components <= 1 ? "connected" : "NOT connected", p.cover.registration_components,
+                p.settings.cover.registration_threshold);
+  os << buf;
+  std::snprintf(buf, sizeof buf,
+                "times (s): rough %.3f  scene %.3f  viewpoints %.3f  matrix %.3f  cover %.3f  total %.3f  (%d threads)\n",
+                p.times.rough_model_s, p.times.scene_s, p.times.viewpoints_s, p.times.matrix_s, p.times.cover_s,
+                p.times.total_s(), p.threads);
+  os << buf;
+  return os.str();
+}
+
+}  // namespace scancell::planner

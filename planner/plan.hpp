@@ -1,0 +1,62 @@
+#pragma once
+// One planning pass of the 3M algorithm (thesis table 3.1): rough model -> candidate viewpoints ->
+// measurability matrix -> set cover -> view plan, with per-stage wall times.
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "planner/config.hpp"
+#include "planner/cover.hpp"
+#include "planner/measurability.hpp"
+#include "planner/mesh.hpp"
+#include "planner/rough_model.hpp"
+#include "planner/viewpoint.hpp"
+
+namespace scancell::planner {
+
+/// Where the object came from, so any other tool can re-place the fine model: plan coordinates are input mesh
+/// coordinates multiplied by `scale` (the recorded object transform is that uniform scale).
+struct ObjectSource {
+  std::string mesh_path;
+  double scale = 1.0;
+  MeshLoadReport load;
+};
+
+struct StageTimes {
+  double load_s = 0.0, rough_model_s = 0.0, scene_s = 0.0, viewpoints_s = 0.0, matrix_s = 0.0, cover_s = 0.0;
+  double total_s() const { return load_s + rough_model_s + scene_s + viewpoints_s + matrix_s + cover_s; }
+};
+
+struct ViewPlan {
+  ObjectSource object;
+  SensorModel sensor;
+  ModelSpec spec;
+  PlannerSettings settings;
+  RoughModelOptions rough_options;
+  RoughModelReport rough_report;
+  RoughModel rough;
+  GenerationReport generation;
+  MatrixStats matrix_stats;
+  std::size_t candidates = 0;
+  double matrix_density = 0.0;
+  std::size_t matrix_bytes = 0;
+  std::vector<Viewpoint> views;  // in selection order
+  CoverResult cover;
+  StageTimes times;
+  int threads = 0;
+};
+
+/// Plans views for an object already in millimetres. `threads` = 0 uses all cores; the plan does not depend
+/// on it.
+ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const ModelSpec& spec,
+                    const PlannerSettings& settings, const RoughModelOptions& rough_options, int threads = 0);
+
+/// The documented plan file (docs/plan-format.md).
+nlohmann::json plan_to_json(const ViewPlan& plan);
+
+/// A short table for people: views, estimated measurability, timings.
+std::string plan_summary(const ViewPlan& plan);
+
+}  // namespace scancell::planner

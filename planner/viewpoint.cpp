@@ -1,0 +1,284 @@
+#include "planner/viewpoint.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <tuple>
+#include <unordered_map>
+
+#include <Eigen/Eigenvalues>
+#include <tbb/parallel_for.h>
+
+#include "planner/errors.hpp"
+
+namespace scancell::planner {
+namespace {
+
+constexpr double kTwoPi = 2.0 * std::numbers::pi;
+
+Eigen::Vector3d twist_reference_x(const Eigen::Vector3d& zc) {
+  const Eigen::Vector3d u = std::abs(zc.z()) < 0.9 ? Eigen::Vector3d::UnitZ() : Eigen::Vector3d::UnitX();
+  return u.cross(zc).normalized();
+}
+
+/// What the neighbourhood of a targeted point tells the VARIABLE rules.
+struct Patch {
+  double rise_mm = 0.0;                            // R_a: how far patch points stand towards the camera
+  Eigen::Vector3d plane_normal = Eigen::Vector3d::Zero();
+  double nearest_mm = std::numeric_limits<double>::infinity();  // from a camera position to any point
+};
+
+}  // namespace
+
+Eigen::Matrix3d camera_rotation(const Eigen::Vector3d& axis, double twist_rad) {
+  const Eigen::Vector3d zc = -axis.normalized();
+  const Eigen::Vector3d x0 = twist_reference_x(zc);
+  const Eigen::Vector3d y0 = zc.cross(x0);
+  const Eigen::Vector3d xc = std::cos(twist_rad) * x0 + std::sin(twist_rad) * y0;
+  Eigen::Matrix3d r;
+  r.col(0) = xc;
+  r.col(1) = zc.cross(xc);
+  r.col(2) = zc;
+  return r;
+}
+
+double twist_towards(const Eigen::Vector3d& axis, const Eigen::Vector3d& dir) {
+  const Eigen::Vector3d zc = -axis.normalized();
+  const Eigen::Vector3d perp = dir - dir.dot(zc) * zc;
+  if (perp.norm() < 1e-9) return 0.0;
+  const Eigen::Vector3d yc = perp.normalized();
+  const Eigen::Vector3d xc = yc.cross(zc);
+  const Eigen::Vector3d x0 = twist_reference_x(zc);
+  const Eigen::Vector3d y0 = zc.cross(x0);
+  double t = std::atan2(xc.dot(y0), xc.dot(x0));
+  return t < 0.0 ? t + kTwoPi : t;
+}
+
+Eigen::Matrix3d Viewpoint::rotation() const { return camera_rotation(axis, twist_rad); }
+
+Eigen::Matrix4d Viewpoint::transform() const {
+  Eigen::Matrix4d t = Eigen::Matrix4d::Identity();
+  t.topLeftCorner<3, 3>() = rotation();
+  t.topRightCorner<3, 1>() = position;
+  return t;
+}
+
+double design_scan_length_mm(const SensorModel& sensor, const ModelSpec& spec, double range_mm,
+                             double design_incidence_rad) {
+  if (sensor.kind != SensorKind::line_scan) return 0.0;
+  const double c = std::cos(design_incidence_rad);
+  const double dx = range_mm * sensor.fov_x_rad / (sensor.samples_x - 1) / c;
+  const double dy2 = 1.0 / spec.density_per_mm2 - dx * dx;
+  if (dy2 <= 0.0) return sensor.scan_length_min_mm;
+  const double length = std::sqrt(dy2) * c * (sensor.samples_y - 1);
+  return std::clamp(length, sensor.scan_length_min_mm, sensor.scan_length_max_mm);
+}
+
+std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const OcclusionScene& scene,
+                                           const SensorModel& sensor, const ModelSpec& spec,
+                                           const ViewpointSettings& st, GenerationReport* report) {
+  if (st.twist_levels < 1) throw ConfigError("viewpoints.twist_levels must be >= 1");
+  if (st.position_decimation < 1) throw ConfigError("viewpoints.position_decimation must be >= 1");
+  GenerationReport rep;
+
+  // Viewpoint positions: RM_v, the rough model decimated again by d_v (DECOUPLED), or RM_s itself (VARIABLE).
+  // Quadric decimation by halfedge collapse keeps surviving vertices where they were, so each RM_v vertex is
+  // an RM_s row; its normal comes from RM_v, smoothed over the larger RM_v triangles.
+  std::vector<std::uint32_t> target_rows;
+  std::vector<Eigen::Vector3d> target_normals;
+  const bool decoupled = st.scheme == ViewpointScheme::decoupled;
+  const int d_t = decoupled ? st.twist_levels : 1;
+  const std::size_t n_positions =
+      decoupled ? std::max<std::size_t>(4, rough.size() / static_cast<std::size_t>(st.position_decimation)) : rough.size();
+  if (n_positions < rough.size()) {
+    const TriangleMesh rmv = decimate(rough.mesh(), n_positions);
+    const auto nv = area_weighted_normals(rmv);
+    // Exact position lookup back into RM_s (positions are unchanged by halfedge collapse).
+    std::vector<std::uint32_t> order(rough.size());
+    for (std::uint32_t i = 0; i < rough.size(); ++i) order[i] = i;
+    auto less = [&](std::uint32_t a, std::uint32_t b) {
+      const auto& p = rough.points[a];
+      const auto& q = rough.points[b];
+      return std::tie(p.x(), p.y(), p.z()) < std::tie(q.x(), q.y(), q.z());
+    };
+    std::sort(order.begin(), order.end(), less);
+    for (std::size_t v = 0; v < rmv.vertices.size(); ++v) {
+      const auto& p = rmv.vertices[v];
+      auto it = std::lower_bound(order.begin(), order.end(), p, [&](std::uint32_t a, const Eigen::Vector3d& q) {
+        const auto& r = rough.points[a];
+        return std::tie(r.x(), r.y(), r.z()) < std::tie(q.x(), q.y(), q.z());
+      });
+      if (it == order.end() || rough.points[*it] != p) continue;
+      target_rows.push_back(*it);
+      target_normals.push_back(nv[v]);
+    }
+    // Keep RM_s order so the candidate list does not depend on the decimator's vertex numbering.
+    std::vector<std::size_t> idx(target_rows.size());
+    for (std::size_t i = 0; i < idx.size(); ++i) idx[i] = i;
+    std::sort(idx.begin(), idx.end(), [&](auto a, auto b) { return target_rows[a] < target_rows[b]; });
+    std::vector<std::uint32_t> rows2;
+    std::vector<Eigen::Vector3d> normals2;
+    for (auto i : idx) {
+      rows2.push_back(target_rows[i]);
+      normals2.push_back(target_normals[i]);
+    }
+    target_rows = std::move(rows2);
+    target_normals = std::move(normals2);
+  } else {
+    for (std::uint32_t i = 0; i < rough.size(); ++i) {
+      target_rows.push_back(i);
+      target_normals.push_back(rough.normals[i]);
+    }
+  }
+  rep.positions = target_rows.size();
+
+  const double r_o = sensor.optimal_standoff_mm;
+  const double range_cap = std::min(sensor.range_max_mm, max_range_for_precision_mm(sensor, spec));
+  const double footprint_half_x = r_o * std::tan(0.5 * sensor.fov_x_rad);
+  const double base_scan = design_scan_length_mm(sensor, spec, r_o * st.standoff_factor, st.scan_length_design_incidence_rad);
+  const double half_y = sensor.kind == SensorKind::line_scan ? 0.5 * base_scan : r_o * std::tan(0.5 * sensor.fov_y_rad);
+  const double patch_radius = std::hypot(footprint_half_x, half_y);
+
+  std::vector<std::vector<Viewpoint>> per_position(target_rows.size());
+  std::vector<std::uint8_t> why(target_rows.size(), 0);  // 0 kept, 1 no normal, 2 inside, 3 clearance
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, target_rows.size(), 8), [&](const auto& range) {
+    for (std::size_t k = range.begin(); k != range.end(); ++k) {
+      const Eigen::Vector3d s = rough.points[target_rows[k]];
+      const Eigen::Vector3d n = target_normals[k];
+      if (n.squaredNorm() < 0.5) {
+        why[k] = 1;
+        continue;
+      }
+      // The local patch: rough points within the footprint cylinder around the normal that face the same
+      // side. Its rise towards the camera sets R_a; its plane sets the VARIABLE twist.
+      Patch patch;
+      Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+      Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+      double wsum = 0.0;
+      for (std::size_t i = 0; i < rough.size(); ++i) {
+        const Eigen::Vector3d d = rough.points[i] - s;
+        const double h = d.dot(n);
+        if (std::abs(h) > patch_radius) continue;
+        if ((d - h * n).squaredNorm() > patch_radius * patch_radius) continue;
+        if (rough.normals[i].dot(n) <= 0.0) continue;
+        patch.rise_mm = std::max(patch.rise_mm, h);
+        const double w = rough.area_mm2[i];
+        centroid += w * rough.points[i];
+        wsum += w;
+      }
+      if (wsum > 0.0) {
+        centroid /= wsum;
+        for (std::size_t i = 0; i < rough.size(); ++i) {
+          const Eigen::Vector3d d = rough.points[i] - s;
+          const double h = d.dot(n);
+          if (std::abs(h) > patch_radius || (d - h * n).squaredNorm() > patch_radius * patch_radius ||
+              rough.normals[i].dot(n) <= 0.0)
+            continue;
+          const Eigen::Vector3d c = rough.points[i] - centroid;
+          cov += rough.area_mm2[i] * c * c.transpose();
+        }
+        Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
+        patch.plane_normal = es.eigenvectors().col(0);
+        if (patch.plane_normal.dot(n) < 0.0) patch.plane_normal = -patch.plane_normal;
+      }
+      const double r_a = std::min(patch.rise_mm, st.standoff_adjust_max_mm);
+      const double standoff = std::min((r_o + r_a) * st.standoff_factor, range_cap);
+      const Eigen::Vector3d position = s + standoff * n;
+
+      // Collision avoidance zone: the camera must stand outside the object and clear of it.
+      double nearest2 = std::numeric_limits<double>::infinity();
+      for (const auto& q : rough.points) nearest2 = std::min(nearest2, (q - position).squaredNorm());
+      if (nearest2 < st.clearance_mm * st.clearance_mm) {
+        why[k] = 3;
+        continue;
+      }
+      if (auto hit = scene.first_hit(position, n, 0.0, 1e7)) {
+        const Triangle& t = rough.triangles[hit->triangle];
+        const Eigen::Vector3d fn = (rough.points[t[1]] - rough.points[t[0]]).cross(rough.points[t[2]] - rough.points[t[0]]);
+        if (fn.dot(n) > 0.0) {  // leaving through a surface: we were inside
+          why[k] = 2;
+          continue;
+        }
+      }
+      const double scan = design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad);
+      // VARIABLE twist: put the receiver (camera +y) as far as possible from the patch plane.
+      const double base_twist = twist_towards(-n, patch.plane_normal);
+      for (int level = 0; level < d_t; ++level) {
+        Viewpoint v;
+        v.position = position;
+        v.axis = -n;
+        v.twist_rad = std::fmod(base_twist + kTwoPi * level / d_t, kTwoPi);
+        v.standoff_mm = standoff;
+        v.scan_length_mm = scan;
+        v.target_row = static_cast<std::int32_t>(target_rows[k]);
+        v.twist_level = level;
+        per_position[k].push_back(v);
+      }
+    }
+  });
+  std::vector<Viewpoint> out;
+  for (std::size_t k = 0; k < per_position.size(); ++k) {
+    rep.dropped_no_normal += why[k] == 1;
+    rep.dropped_inside += why[k] == 2;
+    rep.dropped_clearance += why[k] == 3;
+    out.insert(out.end(), per_position[k].begin(), per_position[k].end());
+  }
+  rep.candidates = out.size();
+  if (report) *report = rep;
+  return out;
+}
+
+std::vector<Viewpoint> single_best_views(const RoughModel& rough, const std::vector<std::uint32_t>& rows,
+                                         const SensorModel& sensor, const ModelSpec& spec, int twist_levels) {
+  if (rows.empty()) return {};
+  if (twist_levels < 1) throw ConfigError("single best view: twist_levels must be >= 1");
+  Eigen::Vector3d mean_n = Eigen::Vector3d::Zero(), centroid = Eigen::Vector3d::Zero();
+  double area = 0.0;
+  for (auto r : rows) {
+    mean_n += rough.area_mm2[r] * rough.normals[r];
+    centroid += rough.area_mm2[r] * rough.points[r];
+    area += rough.area_mm2[r];
+  }
+  if (mean_n.norm() == 0.0 || area == 0.0) return {};
+  mean_n.normalize();
+  centroid /= area;
+  // Centre vertex: the segment row nearest the area centroid.
+  std::uint32_t centre = rows.front();
+  for (auto r : rows)
+    if ((rough.points[r] - centroid).squaredNorm() < (rough.points[centre] - centroid).squaredNorm()) centre = r;
+  const Eigen::Vector3d s = rough.points[centre];
+  const Eigen::Vector3d axis = -mean_n;
+  std::vector<Viewpoint> out;
+  for (int level = 0; level < twist_levels; ++level) {
+    const double twist = kTwoPi * level / twist_levels;
+    const Eigen::Matrix3d r = camera_rotation(axis, twist);
+    // Extent of the segment in the camera frame at zero stand-off (camera at s).
+    double half_x = 0.0, half_y = 0.0, rise = 0.0;
+    for (auto i : rows) {
+      const Eigen::Vector3d p = r.transpose() * (rough.points[i] - s);
+      half_x = std::max(half_x, std::abs(p.x()));
+      half_y = std::max(half_y, std::abs(p.y()));
+      rise = std::max(rise, p.z());  // towards the camera
+    }
+    // Stand-off so the fan covers ±half_x at the nearest point, and R_min is respected.
+    const double fit = half_x / std::tan(0.5 * sensor.fov_x_rad) + rise;
+    const double standoff = std::max(sensor.optimal_standoff_mm + rise, fit);
+    Viewpoint v;
+    v.axis = axis;
+    v.twist_rad = twist;
+    v.position = s - standoff * axis;
+    v.standoff_mm = standoff;
+    v.scan_length_mm = std::clamp(2.0 * half_y, sensor.scan_length_min_mm, sensor.scan_length_max_mm);
+    if (sensor.kind == SensorKind::line_scan) {
+      // Never longer than the density spec allows at this range (normal incidence).
+      const double cap = design_scan_length_mm(sensor, spec, standoff, 0.0);
+      v.scan_length_mm = std::min(v.scan_length_mm, cap);
+    }
+    v.target_row = static_cast<std::int32_t>(centre);
+    v.twist_level = level;
+    out.push_back(v);
+  }
+  return out;
+}
+
+}  // namespace scancell::planner

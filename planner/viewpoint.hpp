@@ -1,0 +1,74 @@
+#pragma once
+// Candidate viewpoints (thesis ch. 6): the optimal scanning zone (each targeted rough-model vertex dilated
+// along its normal by the stand-off), the VARIABLE per-view rules and the DECOUPLED position/twist sampling.
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include "planner/rough_model.hpp"
+#include "planner/scene.hpp"
+#include "planner/sensor.hpp"
+
+namespace scancell::planner {
+
+/// A generalized viewpoint (v, λs): pose (position, axis, twist) plus the sensor setting (scan length).
+struct Viewpoint {
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();  // camera origin (laser rest position), object frame, mm
+  Eigen::Vector3d axis = -Eigen::Vector3d::UnitZ();    // unit boresight (camera -z) in the object frame
+  double twist_rad = 0.0;                              // rotation about the boresight, see camera_rotation()
+  double standoff_mm = 0.0;                            // distance from position to the targeted point
+  double scan_length_mm = 0.0;                         // L_y (line-scan)
+  std::int32_t target_row = -1;                        // rough-model row it was generated for, -1 if none
+  std::int32_t twist_level = 0;                        // DECOUPLED twist index k (twist = base + 2πk/d_t)
+
+  /// Camera-to-object rotation: columns are the camera x, y, z axes in object coordinates.
+  Eigen::Matrix3d rotation() const;
+  /// Camera-to-object homogeneous transform.
+  Eigen::Matrix4d transform() const;
+};
+
+/// Twist zero is a fixed reference: camera x = normalize(u × z_c) with u = object +Z (object +X when the
+/// boresight is within ~25° of Z), camera y = z_c × x. Twist rotates x towards y about z_c = -axis.
+Eigen::Matrix3d camera_rotation(const Eigen::Vector3d& axis, double twist_rad);
+/// The twist that puts the camera +y (the baseline, receiver side) along the component of dir ⊥ axis.
+double twist_towards(const Eigen::Vector3d& axis, const Eigen::Vector3d& dir);
+
+enum class ViewpointScheme { variable, decoupled };
+
+struct ViewpointSettings {
+  ViewpointScheme scheme = ViewpointScheme::decoupled;
+  double standoff_factor = 1.02;                 // f_d
+  int position_decimation = 4;                   // d_v (DECOUPLED)
+  int twist_levels = 8;                          // d_t (DECOUPLED)
+  double standoff_adjust_max_mm = 60.0;          // cap on R_a
+  double scan_length_design_incidence_rad = 0.5235987755982988;  // incidence at which the density must hold
+  double clearance_mm = 20.0;                    // minimum distance from the camera to the object
+};
+
+struct GenerationReport {
+  std::size_t positions = 0;         // viewpoint positions (RM_v vertices)
+  std::size_t candidates = 0;        // kept
+  std::size_t dropped_inside = 0;    // camera position inside the object
+  std::size_t dropped_clearance = 0; // camera position closer to the object than the clearance
+  std::size_t dropped_no_normal = 0;
+};
+
+/// Longest scan length within the sensor's range whose eq. 3.8 density still meets the spec at the given
+/// range with both incidence angles at the design incidence; the shortest allowed when none does.
+double design_scan_length_mm(const SensorModel& sensor, const ModelSpec& spec, double range_mm,
+                             double design_incidence_rad);
+
+/// Candidate viewpoints for the whole rough model. Deterministic; parallel over positions.
+std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const OcclusionScene& scene,
+                                           const SensorModel& sensor, const ModelSpec& spec,
+                                           const ViewpointSettings& settings, GenerationReport* report = nullptr);
+
+/// Thesis 6.3.4 single-best-view candidates for one segment (rows of the rough model): axis opposite the
+/// segment's mean normal, position dilated from the segment's centre vertex far enough that the segment fits
+/// the field of view, twist sampled at `twist_levels` levels, scan length matched to the segment.
+std::vector<Viewpoint> single_best_views(const RoughModel& rough, const std::vector<std::uint32_t>& segment_rows,
+                                         const SensorModel& sensor, const ModelSpec& spec, int twist_levels);
+
+}  // namespace scancell::planner
