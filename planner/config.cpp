@@ -207,6 +207,7 @@ PlannerSettings load_planner_settings(const std::filesystem::path& file) {
     vs.scan_length_design_incidence_rad = v.non_negative("scan_length_design_incidence_rad", vs.scan_length_design_incidence_rad);
     if (!(vs.scan_length_design_incidence_rad < 1.5)) v.fail(v.key_path("scan_length_design_incidence_rad"), "must be < 1.5");
     vs.clearance_mm = v.non_negative("clearance_mm", vs.clearance_mm);
+    vs.bisector_tilt = v.get_or<bool>("bisector_tilt", vs.bisector_tilt);
     v.finish();
   }
   if (y.has("cover")) {

@@ -1,12 +1,18 @@
 #include "planner/mesh.hpp"
 
+#include <cctype>
 #include <cmath>
 #include <cstring>
 #include <limits>
 #include <sstream>
 #include <unordered_map>
 
+#include <fstream>
+#include <mutex>
+
+#include <assimp/DefaultLogger.hpp>
 #include <assimp/Importer.hpp>
+#include <assimp/LogStream.hpp>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
 
@@ -29,6 +35,59 @@ struct Vec3Hash {
   }
 };
 
+/// Collects what assimp logs as errors while it reads. Some of its readers log a malformed element and carry
+/// on (the OFF reader keeps a face whose index is out of range); we refuse such a file instead.
+class ErrorCollector : public Assimp::LogStream {
+ public:
+  void write(const char* message) override {
+    std::string m(message);
+    while (!m.empty() && (m.back() == '\n' || m.back() == '\r')) m.pop_back();
+    if (first.empty()) first = m;
+  }
+  std::string first;
+};
+
+/// Assimp's logger is process-global; one import at a time owns it.
+std::mutex& importer_mutex() {
+  static std::mutex m;
+  return m;
+}
+
+/// Assimp's text parsers read "nan" as 0 without a word. A text mesh file must not hold a token that parses
+/// as a non-finite number (nan, inf, 1e999); binary files (any NUL or control byte) are checked after
+/// import instead.
+void refuse_non_finite_tokens(const std::string& name) {
+  std::ifstream in(name, std::ios::binary);
+  std::string text((std::istreambuf_iterator<char>(in)), {});
+  for (unsigned char c : text)
+    if (c == 0 || (c < 9) || (c > 13 && c < 32)) return;  // binary
+  std::size_t line = 1, pos = 0;
+  while (pos < text.size()) {
+    const char c = text[pos];
+    if (c == '\n') {
+      ++line;
+      ++pos;
+      continue;
+    }
+    if (std::isspace(static_cast<unsigned char>(c))) {
+      ++pos;
+      continue;
+    }
+    if (c == '#') {  // OBJ/OFF comment to end of line
+      while (pos < text.size() && text[pos] != '\n') ++pos;
+      continue;
+    }
+    std::size_t end = pos;
+    while (end < text.size() && !std::isspace(static_cast<unsigned char>(text[end]))) ++end;
+    const std::string token = text.substr(pos, end - pos);
+    char* stop = nullptr;
+    const double v = std::strtod(token.c_str(), &stop);
+    if (stop && *stop == '\0' && stop != token.c_str() && !std::isfinite(v))
+      throw MeshError(name + ": line " + std::to_string(line) + ": non-finite coordinate '" + token + "'");
+    pos = end;
+  }
+}
+
 }  // namespace
 
 TriangleMesh load_mesh(const std::filesystem::path& path, MeshLoadReport* report) {
@@ -39,6 +98,15 @@ TriangleMesh load_mesh(const std::filesystem::path& path, MeshLoadReport* report
   if (std::filesystem::file_size(path, ec) == 0)
     throw MeshError(name + ": file is empty");
 
+  refuse_non_finite_tokens(name);
+
+  std::lock_guard<std::mutex> lock(importer_mutex());
+  Assimp::DefaultLogger::create("", Assimp::Logger::NORMAL, 0);
+  ErrorCollector* errors = new ErrorCollector;  // owned by the logger once attached
+  Assimp::DefaultLogger::get()->attachStream(errors, Assimp::Logger::Err);
+  struct KillLogger {
+    ~KillLogger() { Assimp::DefaultLogger::kill(); }
+  } kill_logger;
   Assimp::Importer importer;
   // No aiProcess_FindDegenerates / FindInvalidData: we report what was wrong ourselves rather than let the
   // importer repair silently. PreTransformVertices bakes node transforms so multi-node files stay correct.
@@ -46,6 +114,7 @@ TriangleMesh load_mesh(const std::filesystem::path& path, MeshLoadReport* report
       name, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_PreTransformVertices |
                 aiProcess_ValidateDataStructure | aiProcess_SortByPType);
   if (!scene) throw MeshError(name + ": cannot parse mesh: " + importer.GetErrorString());
+  if (!errors->first.empty()) throw MeshError(name + ": malformed: " + errors->first);
   if (scene->mNumMeshes == 0) throw MeshError(name + ": file holds no mesh");
 
   TriangleMesh mesh;

@@ -96,7 +96,8 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
                      {"twist_levels", vs.twist_levels},
                      {"standoff_adjust_max_mm", vs.standoff_adjust_max_mm},
                      {"scan_length_design_incidence_rad", vs.scan_length_design_incidence_rad},
-                     {"clearance_mm", vs.clearance_mm}}},
+                     {"clearance_mm", vs.clearance_mm},
+                     {"bisector_tilt", vs.bisector_tilt}}},
                    {"cover",
                     {{"mode", to_string(p.settings.cover.mode)},
                      {"registration_threshold", p.settings.cover.registration_threshold}}},
@@ -139,6 +140,7 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
                      {"scan_length_mm", v.scan_length_mm},
                      {"target_row", v.target_row},
                      {"twist_level", v.twist_level},
+                     {"tilt_rad", v.tilt_rad},
                      {"estimated_gain_area_mm2", p.cover.gain_weight[k]},
                      {"cumulative_estimated_measurability", p.cover.cumulative_fraction[k]},
                      {"cumulative_point_fraction", p.cover.cumulative_point_fraction[k]}});

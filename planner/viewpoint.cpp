@@ -8,6 +8,7 @@
 
 #include <Eigen/Eigenvalues>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include "planner/errors.hpp"
 
@@ -30,6 +31,42 @@ struct Patch {
 
 }  // namespace
 
+std::vector<std::uint32_t> farthest_point_sample(const RoughModel& rough, std::size_t count, double normal_weight_mm) {
+  const std::size_t n = rough.size();
+  if (count >= n) {
+    std::vector<std::uint32_t> all(n);
+    for (std::uint32_t i = 0; i < n; ++i) all[i] = i;
+    return all;
+  }
+  std::vector<std::uint32_t> picked;
+  picked.reserve(count);
+  std::vector<double> d2(n, std::numeric_limits<double>::infinity());
+  const double w2 = normal_weight_mm * normal_weight_mm;
+  std::uint32_t next = 0;  // start from row 0: deterministic
+  struct Best {
+    double d2;
+    std::uint32_t row;
+  };
+  while (picked.size() < count) {
+    picked.push_back(next);
+    const Eigen::Vector3d p = rough.points[next], nn = rough.normals[next];
+    const Best best = tbb::parallel_reduce(
+        tbb::blocked_range<std::uint32_t>(0, static_cast<std::uint32_t>(n), 4096), Best{-1.0, 0},
+        [&](const auto& r, Best b) {
+          for (std::uint32_t i = r.begin(); i != r.end(); ++i) {
+            const double d = (rough.points[i] - p).squaredNorm() + w2 * (rough.normals[i] - nn).squaredNorm();
+            if (d < d2[i]) d2[i] = d;
+            if (d2[i] > b.d2) b = {d2[i], i};
+          }
+          return b;
+        },
+        [](const Best& a, const Best& b) { return (a.d2 > b.d2 || (a.d2 == b.d2 && a.row < b.row)) ? a : b; });
+    if (best.d2 <= 0.0) break;  // only duplicates left
+    next = best.row;
+  }
+  return picked;
+}
+
 Eigen::Matrix3d camera_rotation(const Eigen::Vector3d& axis, double twist_rad) {
   const Eigen::Vector3d zc = -axis.normalized();
   const Eigen::Vector3d x0 = twist_reference_x(zc);
@@ -39,6 +76,15 @@ Eigen::Matrix3d camera_rotation(const Eigen::Vector3d& axis, double twist_rad) {
   r.col(0) = xc;
   r.col(1) = zc.cross(xc);
   r.col(2) = zc;
+  return r;
+}
+
+Eigen::Matrix3d camera_rotation(const Eigen::Vector3d& axis, double twist_rad, double tilt_rad) {
+  Eigen::Matrix3d r = camera_rotation(axis, twist_rad);
+  if (tilt_rad == 0.0) return r;
+  const Eigen::Vector3d y0 = r.col(1), z0 = r.col(2);
+  r.col(2) = std::cos(tilt_rad) * z0 - std::sin(tilt_rad) * y0;
+  r.col(1) = std::sin(tilt_rad) * z0 + std::cos(tilt_rad) * y0;
   return r;
 }
 
@@ -54,7 +100,11 @@ double twist_towards(const Eigen::Vector3d& axis, const Eigen::Vector3d& dir) {
   return t < 0.0 ? t + kTwoPi : t;
 }
 
-Eigen::Matrix3d Viewpoint::rotation() const { return camera_rotation(axis, twist_rad); }
+Eigen::Matrix3d Viewpoint::rotation() const {
+  // `axis` is the actual boresight; the tilt is recorded for information (the frame is rebuilt from the
+  // untilted normal in generate_viewpoints), so only twist is applied here.
+  return camera_rotation(axis, twist_rad);
+}
 
 Eigen::Matrix4d Viewpoint::transform() const {
   Eigen::Matrix4d t = Eigen::Matrix4d::Identity();
@@ -81,55 +131,24 @@ std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const Occlus
   if (st.position_decimation < 1) throw ConfigError("viewpoints.position_decimation must be >= 1");
   GenerationReport rep;
 
-  // Viewpoint positions: RM_v, the rough model decimated again by d_v (DECOUPLED), or RM_s itself (VARIABLE).
-  // Quadric decimation by halfedge collapse keeps surviving vertices where they were, so each RM_v vertex is
-  // an RM_s row; its normal comes from RM_v, smoothed over the larger RM_v triangles.
-  std::vector<std::uint32_t> target_rows;
-  std::vector<Eigen::Vector3d> target_normals;
+  // Viewpoint positions: RM_v, a d_v-times sparser subset of the rough-model rows (DECOUPLED), or every row
+  // (VARIABLE). The thesis decimates RM_s again; quadric decimation leaves flat regions arbitrarily sampled
+  // (it may strip a plate's corners of every nearby position), so we take a farthest-point sample instead,
+  // in position and normal together: it spreads positions evenly, keeps extremities, samples curved regions
+  // more densely, and never lets the two sides of a thin wall share one position.
   const bool decoupled = st.scheme == ViewpointScheme::decoupled;
   const int d_t = decoupled ? st.twist_levels : 1;
   const std::size_t n_positions =
-      decoupled ? std::max<std::size_t>(4, rough.size() / static_cast<std::size_t>(st.position_decimation)) : rough.size();
-  if (n_positions < rough.size()) {
-    const TriangleMesh rmv = decimate(rough.mesh(), n_positions);
-    const auto nv = area_weighted_normals(rmv);
-    // Exact position lookup back into RM_s (positions are unchanged by halfedge collapse).
-    std::vector<std::uint32_t> order(rough.size());
-    for (std::uint32_t i = 0; i < rough.size(); ++i) order[i] = i;
-    auto less = [&](std::uint32_t a, std::uint32_t b) {
-      const auto& p = rough.points[a];
-      const auto& q = rough.points[b];
-      return std::tie(p.x(), p.y(), p.z()) < std::tie(q.x(), q.y(), q.z());
-    };
-    std::sort(order.begin(), order.end(), less);
-    for (std::size_t v = 0; v < rmv.vertices.size(); ++v) {
-      const auto& p = rmv.vertices[v];
-      auto it = std::lower_bound(order.begin(), order.end(), p, [&](std::uint32_t a, const Eigen::Vector3d& q) {
-        const auto& r = rough.points[a];
-        return std::tie(r.x(), r.y(), r.z()) < std::tie(q.x(), q.y(), q.z());
-      });
-      if (it == order.end() || rough.points[*it] != p) continue;
-      target_rows.push_back(*it);
-      target_normals.push_back(nv[v]);
-    }
-    // Keep RM_s order so the candidate list does not depend on the decimator's vertex numbering.
-    std::vector<std::size_t> idx(target_rows.size());
-    for (std::size_t i = 0; i < idx.size(); ++i) idx[i] = i;
-    std::sort(idx.begin(), idx.end(), [&](auto a, auto b) { return target_rows[a] < target_rows[b]; });
-    std::vector<std::uint32_t> rows2;
-    std::vector<Eigen::Vector3d> normals2;
-    for (auto i : idx) {
-      rows2.push_back(target_rows[i]);
-      normals2.push_back(target_normals[i]);
-    }
-    target_rows = std::move(rows2);
-    target_normals = std::move(normals2);
-  } else {
-    for (std::uint32_t i = 0; i < rough.size(); ++i) {
-      target_rows.push_back(i);
-      target_normals.push_back(rough.normals[i]);
-    }
-  }
+      decoupled ? std::max<std::size_t>(1, rough.size() / static_cast<std::size_t>(st.position_decimation)) : rough.size();
+  const double normal_weight_mm = sensor.optimal_standoff_mm * std::tan(0.5 * sensor.fov_x_rad);
+  std::vector<std::uint32_t> target_rows = n_positions < rough.size()
+                                               ? farthest_point_sample(rough, n_positions, normal_weight_mm)
+                                               : std::vector<std::uint32_t>{};
+  if (target_rows.empty())
+    for (std::uint32_t i = 0; i < rough.size(); ++i) target_rows.push_back(i);
+  std::sort(target_rows.begin(), target_rows.end());  // candidate order follows the rows, not the sampling order
+  std::vector<Eigen::Vector3d> target_normals;
+  for (auto r : target_rows) target_normals.push_back(rough.normals[r]);
   rep.positions = target_rows.size();
 
   const double r_o = sensor.optimal_standoff_mm;
@@ -186,19 +205,22 @@ std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const Occlus
       const Eigen::Vector3d position = s + standoff * n;
 
       // Collision avoidance zone: the camera must stand outside the object and clear of it.
-      double nearest2 = std::numeric_limits<double>::infinity();
-      for (const auto& q : rough.points) nearest2 = std::min(nearest2, (q - position).squaredNorm());
-      if (nearest2 < st.clearance_mm * st.clearance_mm) {
-        why[k] = 3;
-        continue;
-      }
-      if (auto hit = scene.first_hit(position, n, 0.0, 1e7)) {
-        const Triangle& t = rough.triangles[hit->triangle];
-        const Eigen::Vector3d fn = (rough.points[t[1]] - rough.points[t[0]]).cross(rough.points[t[2]] - rough.points[t[0]]);
-        if (fn.dot(n) > 0.0) {  // leaving through a surface: we were inside
-          why[k] = 2;
-          continue;
+      auto obstruction = [&](const Eigen::Vector3d& pos, const Eigen::Vector3d& out_dir) -> std::uint8_t {
+        double nearest2 = std::numeric_limits<double>::infinity();
+        for (const auto& q : rough.points) nearest2 = std::min(nearest2, (q - pos).squaredNorm());
+        if (nearest2 < st.clearance_mm * st.clearance_mm) return 3;
+        if (auto hit = scene.first_hit(pos, out_dir, 0.0, 1e7)) {
+          const Triangle& t = rough.triangles[hit->triangle];
+          const Eigen::Vector3d fn =
+              (rough.points[t[1]] - rough.points[t[0]]).cross(rough.points[t[2]] - rough.points[t[0]]);
+          if (fn.dot(out_dir) > 0.0) return 2;  // leaving through a surface: we were inside
         }
+        return 0;
+      };
+      auto clear_of_object = [&](const Eigen::Vector3d& pos) { return obstruction(pos, (pos - s).normalized()) == 0; };
+      if (const std::uint8_t o = obstruction(position, n)) {
+        why[k] = o;
+        continue;
       }
       const double scan = design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad);
       // VARIABLE twist: put the receiver (camera +y) as far as possible from the patch plane.
@@ -213,6 +235,16 @@ std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const Occlus
         v.target_row = static_cast<std::int32_t>(target_rows[k]);
         v.twist_level = level;
         per_position[k].push_back(v);
+        if (st.bisector_tilt) {
+          const double tilt = 0.5 * std::atan2(sensor.baseline_mm, standoff);
+          const Eigen::Matrix3d rt = camera_rotation(v.axis, v.twist_rad, tilt);
+          Viewpoint t = v;
+          t.axis = -rt.col(2);
+          t.twist_rad = twist_towards(t.axis, rt.col(1));
+          t.position = s + standoff * rt.col(2);
+          t.tilt_rad = tilt;
+          if (clear_of_object(t.position)) per_position[k].push_back(t);
+        }
       }
     }
   });
@@ -229,7 +261,8 @@ std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const Occlus
 }
 
 std::vector<Viewpoint> single_best_views(const RoughModel& rough, const std::vector<std::uint32_t>& rows,
-                                         const SensorModel& sensor, const ModelSpec& spec, int twist_levels) {
+                                         const SensorModel& sensor, const ModelSpec& spec, int twist_levels,
+                                         double standoff_factor) {
   if (rows.empty()) return {};
   if (twist_levels < 1) throw ConfigError("single best view: twist_levels must be >= 1");
   Eigen::Vector3d mean_n = Eigen::Vector3d::Zero(), centroid = Eigen::Vector3d::Zero();
@@ -262,7 +295,7 @@ std::vector<Viewpoint> single_best_views(const RoughModel& rough, const std::vec
     }
     // Stand-off so the fan covers ±half_x at the nearest point, and R_min is respected.
     const double fit = half_x / std::tan(0.5 * sensor.fov_x_rad) + rise;
-    const double standoff = std::max(sensor.optimal_standoff_mm + rise, fit);
+    const double standoff = std::max(sensor.optimal_standoff_mm + rise, fit) * standoff_factor;
     Viewpoint v;
     v.axis = axis;
     v.twist_rad = twist;

@@ -22,12 +22,17 @@ struct Viewpoint {
   double scan_length_mm = 0.0;                         // L_y (line-scan)
   std::int32_t target_row = -1;                        // rough-model row it was generated for, -1 if none
   std::int32_t twist_level = 0;                        // DECOUPLED twist index k (twist = base + 2πk/d_t)
+  double tilt_rad = 0.0;                               // bisector tilt about camera x (0: laser along normal)
 
   /// Camera-to-object rotation: columns are the camera x, y, z axes in object coordinates.
   Eigen::Matrix3d rotation() const;
   /// Camera-to-object homogeneous transform.
   Eigen::Matrix4d transform() const;
 };
+
+/// Camera-to-object rotation of a view with boresight `axis`, twist, and a tilt about the resulting camera x
+/// axis (positive tilt turns the boresight towards camera -y, moving the camera towards the receiver side).
+Eigen::Matrix3d camera_rotation(const Eigen::Vector3d& axis, double twist_rad, double tilt_rad);
 
 /// Twist zero is a fixed reference: camera x = normalize(u × z_c) with u = object +Z (object +X when the
 /// boresight is within ~25° of Z), camera y = z_c × x. Twist rotates x towards y about z_c = -axis.
@@ -45,6 +50,11 @@ struct ViewpointSettings {
   double standoff_adjust_max_mm = 60.0;          // cap on R_a
   double scan_length_design_incidence_rad = 0.5235987755982988;  // incidence at which the density must hold
   double clearance_mm = 20.0;                    // minimum distance from the camera to the object
+  /// Also generate, for every position and twist, the view tilted about camera x so that the targeted normal
+  /// bisects the laser and receiver rays (each at half the triangulation angle atan(b/R)). The thesis' views
+  /// put the laser along the normal and the receiver a full triangulation angle off it, which cannot see the
+  /// floor of a cavity as deep as it is wide; the bisecting view can.
+  bool bisector_tilt = true;
 };
 
 struct GenerationReport {
@@ -60,6 +70,10 @@ struct GenerationReport {
 double design_scan_length_mm(const SensorModel& sensor, const ModelSpec& spec, double range_mm,
                              double design_incidence_rad);
 
+/// `count` rows spread by farthest-point sampling in (position, normal_weight_mm · normal) space, starting from
+/// row 0. Deterministic for any thread count.
+std::vector<std::uint32_t> farthest_point_sample(const RoughModel& rough, std::size_t count, double normal_weight_mm);
+
 /// Candidate viewpoints for the whole rough model. Deterministic; parallel over positions.
 std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const OcclusionScene& scene,
                                            const SensorModel& sensor, const ModelSpec& spec,
@@ -67,8 +81,9 @@ std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const Occlus
 
 /// Thesis 6.3.4 single-best-view candidates for one segment (rows of the rough model): axis opposite the
 /// segment's mean normal, position dilated from the segment's centre vertex far enough that the segment fits
-/// the field of view, twist sampled at `twist_levels` levels, scan length matched to the segment.
+/// the field of view (times f_d), twist sampled at `twist_levels` levels, scan length matched to the segment.
 std::vector<Viewpoint> single_best_views(const RoughModel& rough, const std::vector<std::uint32_t>& segment_rows,
-                                         const SensorModel& sensor, const ModelSpec& spec, int twist_levels);
+                                         const SensorModel& sensor, const ModelSpec& spec, int twist_levels,
+                                         double standoff_factor = 1.02);
 
 }  // namespace scancell::planner

@@ -1,0 +1,106 @@
+// Configuration files: the shipped ones load with the thesis' values; bad ones are refused with the key path.
+#include <filesystem>
+#include <fstream>
+#include <numbers>
+#include <regex>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "planner/errors.hpp"
+#include "test_meshes.hpp"
+
+namespace scancell::planner {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+TEST(Config, ShippedSensorIsTheThesisSensor) {
+  const SensorModel s = testing::thesis_sensor();
+  EXPECT_EQ(s.kind, SensorKind::line_scan);
+  EXPECT_NEAR(s.fov_x_rad, 27.0 * std::numbers::pi / 180.0, 1e-12);
+  EXPECT_EQ(s.baseline_mm, 180.0);
+  EXPECT_EQ(s.range_min_mm, 142.0);
+  EXPECT_EQ(s.range_max_mm, 407.0);
+  EXPECT_EQ(s.scan_length_max_mm, 300.0);
+  EXPECT_EQ(s.samples_x, 256);
+  EXPECT_EQ(s.samples_y, 256);
+  EXPECT_NEAR(s.grazing_yz_rad, std::numbers::pi / 3, 1e-12);
+  EXPECT_NEAR(s.grazing_xz_rad, 70.0 * std::numbers::pi / 180.0, 1e-12);
+  const ModelSpec spec = testing::thesis_spec();
+  EXPECT_EQ(spec.precision_mm, 0.050);
+  EXPECT_EQ(spec.density_per_mm2, 2.0);
+  const PlannerSettings p = load_planner_settings(testing::source_path("config/planner/default.yaml"));
+  EXPECT_EQ(p.viewpoints.twist_levels, 8);
+  EXPECT_EQ(p.viewpoints.position_decimation, 4);
+  EXPECT_EQ(p.cover.mode, CoverMode::constrained);
+}
+
+class BadConfig : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    std::ifstream in(testing::source_path("config/sensors/line-scan-thesis.yaml"));
+    good_ = std::string(std::istreambuf_iterator<char>(in), {});
+    path_ = fs::temp_directory_path() / ("scancell-cfg-" + std::to_string(::getpid()) + ".yaml");
+  }
+  void TearDown() override { fs::remove(path_); }
+  /// Loads the shipped sensor with one line replaced (regex on the whole text) and returns the error.
+  std::string error_with(const std::string& pattern, const std::string& replacement) {
+    const std::string text = std::regex_replace(good_, std::regex(pattern), replacement);
+    EXPECT_NE(text, good_) << "pattern did not match: " << pattern;
+    std::ofstream(path_) << text;
+    try {
+      load_sensor(path_);
+    } catch (const ConfigError& e) {
+      return e.what();
+    }
+    return "<accepted>";
+  }
+  std::string good_;
+  fs::path path_;
+};
+
+TEST_F(BadConfig, MissingKeyNamesItsPath) {
+  EXPECT_THAT(error_with("range_min_mm: 142[^\n]*\n", ""), HasSubstr("range_min_mm: missing"));
+  EXPECT_THAT(error_with("  cz_per_mm: [^\n]*\n", ""), HasSubstr("noise.cz_per_mm: missing"));
+}
+
+TEST_F(BadConfig, RangeMinNotBelowRangeMax) {
+  EXPECT_THAT(error_with("range_min_mm: 142", "range_min_mm: 500"), HasSubstr("range_max_mm: must be greater than range_min_mm"));
+}
+
+TEST_F(BadConfig, NegativeAndNonNumericValues) {
+  EXPECT_THAT(error_with("baseline_mm: 180", "baseline_mm: -180"), HasSubstr("baseline_mm: must be > 0"));
+  EXPECT_THAT(error_with("baseline_mm: 180", "baseline_mm: wide"), HasSubstr("baseline_mm: cannot read 'wide' as a number"));
+  EXPECT_THAT(error_with("t_yz_rad: [0-9.]+", "t_yz_rad: .nan"), HasSubstr("grazing.t_yz_rad: must be a finite number"));
+  EXPECT_THAT(error_with("samples_x: 256", "samples_x: 1"), HasSubstr("samples_x: must be >= 2"));
+}
+
+TEST_F(BadConfig, UnknownKeyIsRefused) {
+  EXPECT_THAT(error_with("baseline_mm: 180", "baseline_mm: 180\nbaseline_cm: 18"), HasSubstr("baseline_cm: unknown key"));
+  EXPECT_THAT(error_with("  cx: ", "  cxx: 1\n  cx: "), HasSubstr("noise.cxx: unknown key"));
+}
+
+TEST_F(BadConfig, InvalidYamlNamesTheLine) {
+  EXPECT_THAT(error_with("samples_y: 256", "samples_y: [256"), HasSubstr("invalid YAML at line"));
+  EXPECT_THAT(error_with("kind: line_scan", "kind: pinhole"), HasSubstr("kind: must be line_scan or random_access"));
+}
+
+TEST(Config, MissingFileAndBadPlannerSettings) {
+  EXPECT_THROW(load_sensor("/nonexistent/sensor.yaml"), ConfigError);
+  const fs::path p = fs::temp_directory_path() / ("scancell-settings-" + std::to_string(::getpid()) + ".yaml");
+  std::ofstream(p) << "viewpoints:\n  twist_levels: 0\n";
+  try {
+    load_planner_settings(p);
+    ADD_FAILURE() << "accepted twist_levels 0";
+  } catch (const ConfigError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("viewpoints.twist_levels: must be in [1, 360]"));
+  }
+  std::ofstream(p) << "cover:\n  mode: exhaustive\n";
+  EXPECT_THROW(load_planner_settings(p), ConfigError);
+  fs::remove(p);
+}
+
+}  // namespace
+}  // namespace scancell::planner

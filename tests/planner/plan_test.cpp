@@ -1,0 +1,163 @@
+// Whole-pipeline tests: determinism across runs and thread counts, and the scancell command's contract.
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "planner/plan.hpp"
+#include "test_meshes.hpp"
+
+namespace scancell::planner {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+nlohmann::json plan_without_times(const ViewPlan& p) {
+  nlohmann::json j = plan_to_json(p);
+  j["summary"].erase("times_s");
+  j["summary"].erase("threads");
+  return j;
+}
+
+TriangleMesh mushroom_mm() {
+  TriangleMesh m = load_mesh(testing::source_path("tests/data/mushroom.off"));
+  apply_scale(m, fit_scale(m, 200.0));
+  return m;
+}
+
+TEST(Plan, IdenticalForIdenticalInputsAndSeedAcrossThreadCounts) {
+  RoughModelOptions o;
+  o.target_vertices = 800;
+  o.normal_noise_mm = 0.5;
+  o.seed = 7;
+  const auto sensor = testing::thesis_sensor();
+  const auto spec = testing::thesis_spec();
+  const auto a = plan_without_times(plan_views(mushroom_mm(), sensor, spec, {}, o, 1));
+  const auto b = plan_without_times(plan_views(mushroom_mm(), sensor, spec, {}, o, 2));
+  const auto c = plan_without_times(plan_views(mushroom_mm(), sensor, spec, {}, o, 2));
+  EXPECT_EQ(a.dump(), b.dump());
+  EXPECT_EQ(b.dump(), c.dump());
+  EXPECT_GT(a["views"].size(), 5u);
+  o.seed = 8;  // another seed, another rough model, another plan
+  EXPECT_NE(a.dump(), plan_without_times(plan_views(mushroom_mm(), sensor, spec, {}, o, 2)).dump());
+}
+
+TEST(Plan, MushroomIsCoveredWithAConnectedRegistrationGraph) {
+  RoughModelOptions o;
+  o.target_vertices = 1000;
+  const ViewPlan p = plan_views(mushroom_mm(), testing::thesis_sensor(), testing::thesis_spec(), {}, o);
+  EXPECT_GE(p.cover.measurable_fraction, 0.99);
+  EXPECT_NEAR(p.cover.cumulative_fraction.back(), p.cover.measurable_fraction, 1e-9);
+  EXPECT_EQ(p.cover.registration_components, 1u);
+  // The thesis' oracle needs 23-36 views for 95-99.9 % on this object; a rough-model plan lands near that.
+  EXPECT_GE(p.views.size(), 15u);
+  EXPECT_LE(p.views.size(), 45u);
+  // Each view's cumulative estimate is non-decreasing and its transform puts the target on the boresight.
+  for (std::size_t k = 0; k < p.views.size(); ++k) {
+    if (k) {
+      EXPECT_GE(p.cover.cumulative_fraction[k], p.cover.cumulative_fraction[k - 1]);
+    }
+    const Viewpoint& v = p.views[k];
+    const Eigen::Vector3d target = p.rough.points[v.target_row];
+    const Eigen::Vector3d pc = v.rotation().transpose() * (target - v.position);
+    EXPECT_NEAR(pc.x(), 0.0, 1e-9);
+    EXPECT_NEAR(pc.y(), 0.0, 1e-9);
+    EXPECT_NEAR(-pc.z(), v.standoff_mm, 1e-9);
+  }
+}
+
+// ---- the command line ----
+
+struct CommandResult {
+  int status;
+  std::string output;
+};
+
+CommandResult run(const std::string& args) {
+  const std::string cmd = std::string(SCANCELL_BINARY) + " " + args + " 2>&1";
+  CommandResult r{-1, {}};
+  FILE* p = ::popen(cmd.c_str(), "r");
+  if (!p) return r;
+  char buf[4096];
+  while (std::size_t n = std::fread(buf, 1, sizeof buf, p)) r.output.append(buf, n);
+  const int st = ::pclose(p);
+  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+  return r;
+}
+
+std::string base_args(const std::string& mesh, const fs::path& out) {
+  return "plan --mesh " + mesh + " --sensor " + testing::source_path("config/sensors/line-scan-thesis.yaml") + " --spec " +
+         testing::source_path("config/spec/thesis.yaml") + " --out " + out.string();
+}
+
+class Cli : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("scancell-cli-" + std::to_string(::getpid()) + "-" + ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  fs::path dir_;
+};
+
+TEST_F(Cli, RefusesEveryBadMeshWithItsNameAndNoPlan) {
+  for (const char* name : {"empty.stl", "unparseable.stl", "invalidvertex.stl"}) {
+    const fs::path out = dir_ / "plan.json";
+    const CommandResult r = run(base_args(testing::source_path(std::string("tests/data/bad/") + name), out));
+    EXPECT_EQ(r.status, 3) << r.output;
+    EXPECT_THAT(r.output, HasSubstr(name));
+    EXPECT_THAT(r.output, HasSubstr("mesh error"));
+    EXPECT_FALSE(fs::exists(out));
+  }
+}
+
+TEST_F(Cli, RefusesBadConfigWithTheKeyPath) {
+  const fs::path cfg = dir_ / "spec.yaml";
+  std::ofstream(cfg) << "precision_mm: 0.05\n";  // density missing
+  const CommandResult r = run("plan --mesh " + testing::source_path("tests/data/mushroom.off") + " --sensor " +
+                    testing::source_path("config/sensors/line-scan-thesis.yaml") + " --spec " + cfg.string() + " --out " +
+                    (dir_ / "p.json").string());
+  EXPECT_EQ(r.status, 4) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("density_per_mm2: missing"));
+}
+
+TEST_F(Cli, RefusesBadOptions) {
+  const fs::path out = dir_ / "plan.json";
+  EXPECT_EQ(run(base_args(testing::source_path("tests/data/mushroom.off"), out) + " --fit-mm abc").status, 2);
+  EXPECT_EQ(run(base_args(testing::source_path("tests/data/mushroom.off"), out) + " --bogus 1").status, 2);
+  EXPECT_EQ(run(base_args(testing::source_path("tests/data/mushroom.off"), out) + " --scale 2 --fit-mm 200").status, 2);
+  EXPECT_EQ(run(base_args(testing::source_path("tests/data/mushroom.off"), out) + " --fit-mm 200 --rho-rel 1").status, 4);
+  EXPECT_FALSE(fs::exists(out));
+}
+
+TEST_F(Cli, WritesADocumentedPlan) {
+  const fs::path out = dir_ / "plan.json";
+  const CommandResult r = run(base_args(testing::source_path("tests/data/mushroom.off"), out) +
+                    " --fit-mm 200 --rough-vertices 600 --settings " + testing::source_path("config/planner/default.yaml"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("estimated measurability"));
+  std::ifstream in(out);
+  const auto j = nlohmann::json::parse(in);
+  EXPECT_EQ(j["format"], "scancell-plan");
+  EXPECT_EQ(j["version"], 1);
+  EXPECT_EQ(j["units"]["length"], "mm");
+  EXPECT_EQ(j["rough_model"]["vertices"], 600);
+  EXPECT_EQ(j["sensor"]["baseline_mm"], 180.0);
+  const double scale = j["object"]["scale"];
+  EXPECT_GT(scale, 1.0);
+  EXPECT_EQ(j["object"]["transform_row_major"][0], scale);
+  ASSERT_GT(j["views"].size(), 0u);
+  const auto& v = j["views"][0];
+  EXPECT_EQ(v["camera_to_object_row_major"].size(), 16u);
+  EXPECT_EQ(v["camera_to_object_row_major"][15], 1.0);
+  EXPECT_EQ(j["summary"]["views"], j["views"].size());
+  EXPECT_TRUE(j["summary"]["registration"]["connected"]);
+  EXPECT_FALSE(fs::exists(out.string() + ".tmp"));
+}
+
+}  // namespace
+}  // namespace scancell::planner
