@@ -39,12 +39,13 @@ double ray_offset(const RoughModel& rough, const MatrixSettings& st) {
 }
 
 /// Conservative: false only when no point of the sphere can be inside the frustum.
-bool sphere_may_touch_frustum(const SensorModel& s, double scan_length_mm, const Eigen::Vector3d& c, double r) {
+bool sphere_may_touch_frustum(const SensorModel& s, const FrustumTerms& f, double scan_length_mm, const Eigen::Vector3d& c,
+                              double r) {
   const double z = -c.z();
   if (z + r < s.range_min_mm || z - r > s.range_max_mm) return false;
   const double zfar = z + r;
-  if (std::abs(c.x()) - r > zfar * std::tan(0.5 * s.fov_x_rad)) return false;
-  const double half_y = s.kind == SensorKind::line_scan ? 0.5 * scan_length_mm : zfar * std::tan(0.5 * s.fov_y_rad);
+  if (std::abs(c.x()) - r > zfar * f.tan_half_x) return false;
+  const double half_y = s.kind == SensorKind::line_scan ? 0.5 * scan_length_mm : zfar * f.tan_half_y;
   return std::abs(c.y()) - r <= half_y;
 }
 
@@ -136,6 +137,7 @@ MeasurabilityMatrix build_measurability(const RoughModel& rough, const Occlusion
   m.columns.resize(candidates.size());
   const auto blocks = make_blocks(rough);
   const double eps = ray_offset(rough, settings);
+  const FrustumTerms terms(sensor);
   Counters cnt;
 
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, candidates.size(), 4), [&](const auto& range) {
@@ -162,13 +164,13 @@ MeasurabilityMatrix build_measurability(const RoughModel& rough, const Occlusion
       };
       for (std::uint32_t b = 0; b < blocks.size(); ++b) {
         const std::uint32_t begin = b * kBlock, end = std::min<std::uint32_t>(begin + kBlock, m.n_rows);
-        if (!sphere_may_touch_frustum(sensor, v.scan_length_mm, rt * (blocks[b].centre - v.position), blocks[b].radius)) {
+        if (!sphere_may_touch_frustum(sensor, terms, v.scan_length_mm, rt * (blocks[b].centre - v.position), blocks[b].radius)) {
           culled += end - begin;
           continue;
         }
         for (std::uint32_t i = begin; i < end; ++i) {
           const Eigen::Vector3d pc = rt * (rough.points[i] - v.position);
-          const PointTest t = test_point(sensor, spec, v.scan_length_mm, pc, rt * rough.normals[i]);
+          const PointTest t = test_point(sensor, terms, spec, v.scan_length_mm, pc, rt * rough.normals[i]);
           in_frustum += t.in_frustum;
           surviving += t.facing;
           if (!t.compliant) continue;
@@ -202,6 +204,7 @@ MeasurabilityMatrix build_measurability_naive(const RoughModel& rough, const Occ
   m.n_rows = static_cast<std::uint32_t>(rough.size());
   m.columns.resize(candidates.size());
   const double eps = ray_offset(rough, settings);
+  const FrustumTerms terms(sensor);
   Counters cnt;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, candidates.size(), 1), [&](const auto& range) {
     std::vector<OcclusionRay> rays(2 * kPairsPerFlush);
@@ -216,7 +219,7 @@ MeasurabilityMatrix build_measurability_naive(const RoughModel& rough, const Occ
         const std::uint32_t e = std::min<std::uint32_t>(b + kPairsPerFlush, m.n_rows);
         for (std::uint32_t i = b; i < e; ++i) {
           const Eigen::Vector3d pc = rt * (rough.points[i] - v.position);
-          PointTest t = test_point(sensor, spec, v.scan_length_mm, pc, rt * rough.normals[i]);
+          PointTest t = test_point(sensor, terms, spec, v.scan_length_mm, pc, rt * rough.normals[i]);
           if (!t.in_frustum) {  // rays go where the laser would be for this y, in or out of the frustum
             t.laser_y_mm = sensor.kind == SensorKind::line_scan ? pc.y() : 0.0;
             t.receiver_y_mm = t.laser_y_mm + sensor.baseline_mm;

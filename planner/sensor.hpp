@@ -6,6 +6,7 @@
 // point at camera coordinates (x, y, -z) lies at range z. For a line-scan camera the profile that measures
 // the point is taken with the laser at (0, y, 0) and the receiver at (0, y + b, 0). A random-access camera
 // scans both axes optically from a fixed laser at the origin, receiver at (0, b, 0).
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -92,44 +93,76 @@ struct PointTest {
   double receiver_y_mm = 0.0;  // camera-frame y of the receiver
 };
 
+/// Per-sensor constants of the hot loop, computed once per matrix build rather than per pair.
+struct FrustumTerms {
+  double tan_half_x = 0.0, tan_half_y = 0.0, cos_t_xz = 0.0, cos_t_yz = 0.0, dx_per_mm = 0.0;
+  explicit FrustumTerms(const SensorModel& s)
+      : tan_half_x(std::tan(0.5 * s.fov_x_rad)),
+        tan_half_y(s.kind == SensorKind::random_access ? std::tan(0.5 * s.fov_y_rad) : 0.0),
+        cos_t_xz(std::cos(s.grazing_xz_rad)),
+        cos_t_yz(std::cos(s.grazing_yz_rad)),
+        dx_per_mm(s.fov_x_rad / (s.samples_x - 1)) {}
+};
+
+/// Cosine of the angle between 2-D vectors (a0, a1) and (b0, b1); `fallback` when a has no length.
+inline double cos_between(double a0, double a1, double b0, double b1, double fallback) {
+  const double la = a0 * a0 + a1 * a1;
+  if (la <= 0.0) return fallback;
+  return (a0 * b0 + a1 * b1) / std::sqrt(la * (b0 * b0 + b1 * b1));
+}
+
 /// Frustum occupancy, bi-static facing and specification compliance (thesis 3.3.1) for a point p and unit
 /// normal n, both in camera coordinates. Occlusion is the caller's business (it needs the scene).
-inline PointTest test_point(const SensorModel& s, const ModelSpec& spec, double scan_length_mm,
-                            const Eigen::Vector3d& p, const Eigen::Vector3d& n) {
+/// The hot path works with cosines (no trigonometric calls); the angles are filled in only when `angles`.
+inline PointTest test_point(const SensorModel& s, const FrustumTerms& f, const ModelSpec& spec, double scan_length_mm,
+                            const Eigen::Vector3d& p, const Eigen::Vector3d& n, bool angles = false) {
   PointTest t;
   const double z = -p.z();
   if (!(z >= s.range_min_mm && z <= s.range_max_mm)) return t;
-  const double half_x = 0.5 * s.fov_x_rad;
-  if (std::abs(p.x()) > z * std::tan(half_x)) return t;
+  if (std::abs(p.x()) > z * f.tan_half_x) return t;
   if (s.kind == SensorKind::line_scan) {
     if (std::abs(p.y()) > 0.5 * scan_length_mm) return t;
     t.laser_y_mm = p.y();
   } else {
-    if (std::abs(p.y()) > z * std::tan(0.5 * s.fov_y_rad)) return t;
+    if (std::abs(p.y()) > z * f.tan_half_y) return t;
     t.laser_y_mm = 0.0;
   }
   t.receiver_y_mm = t.laser_y_mm + s.baseline_mm;
   t.in_frustum = true;
 
   // Bi-static facing: the surface must face both the laser source and the receiver.
-  const Eigen::Vector3d to_laser(-p.x(), t.laser_y_mm - p.y(), -p.z());
-  const Eigen::Vector3d to_receiver(-p.x(), t.receiver_y_mm - p.y(), -p.z());
-  if (n.dot(to_laser) <= 0.0 || n.dot(to_receiver) <= 0.0) return t;
+  const double to_laser = -n.x() * p.x() + n.y() * (t.laser_y_mm - p.y()) - n.z() * p.z();
+  const double to_receiver = to_laser + n.y() * s.baseline_mm;
+  if (to_laser <= 0.0 || to_receiver <= 0.0) return t;
   t.facing = true;
 
-  // Incidence of the normal projected on the x-z and y-z planes, against the laser ray direction.
-  Incidence& g = t.incidence;
-  g.z_mm = z;
-  g.phi_xz_rad = std::atan2(p.x(), z);
-  g.theta_xz_rad = std::abs(std::atan2(n.x(), n.z()) - std::atan2(-p.x(), z));
-  const double laser_dir_yz = (s.kind == SensorKind::line_scan) ? 0.0 : std::atan2(-p.y(), z);
-  g.theta_yz_rad = std::abs(std::atan2(n.y(), n.z()) - laser_dir_yz);
-
-  t.sigma_z_mm = predicted_sigma_z_mm(s, g);
-  if (!std::isfinite(t.sigma_z_mm)) return t;
-  t.density_per_mm2 = predicted_density_per_mm2(s, g, scan_length_mm);
+  // Incidence of the normal projected on the x-z and y-z planes, against the laser ray direction. A normal
+  // with no component in a plane has no inclination there (cos = the ray's own, or 1).
+  const double cos_phi = z / std::sqrt(p.x() * p.x() + z * z);
+  const double cos_xz = cos_between(n.x(), n.z(), -p.x(), z, cos_phi);
+  const double cos_yz = s.kind == SensorKind::line_scan ? cos_between(n.y(), n.z(), 0.0, 1.0, 1.0)
+                                                        : cos_between(n.y(), n.z(), -p.y(), z, 1.0);
+  if (angles) {
+    t.incidence = {z, std::acos(std::clamp(cos_phi, -1.0, 1.0)) * (p.x() < 0 ? -1.0 : 1.0),
+                   std::acos(std::clamp(cos_xz, -1.0, 1.0)), std::acos(std::clamp(cos_yz, -1.0, 1.0))};
+  } else {
+    t.incidence.z_mm = z;
+  }
+  // eq. 3.4: U_i cuts the measurement at the grazing thresholds.
+  if (!(cos_yz > f.cos_t_yz) || !(cos_xz > f.cos_t_xz)) return t;
+  t.sigma_z_mm = s.noise_cz_per_mm * z * z / cos_yz;
+  // eq. 3.6-3.8.
+  const double dx = z / cos_phi * f.dx_per_mm / cos_xz;
+  const double dy = (s.kind == SensorKind::line_scan ? scan_length_mm : z * s.fov_y_rad) / (s.samples_y - 1) / cos_yz;
+  t.density_per_mm2 = 1.0 / (dx * dx + dy * dy);
   t.compliant = t.sigma_z_mm <= spec.precision_mm && t.density_per_mm2 >= spec.density_per_mm2;
   return t;
+}
+
+/// Convenience form for tests and diagnostics: computes the sensor terms and the incidence angles.
+inline PointTest test_point(const SensorModel& s, const ModelSpec& spec, double scan_length_mm, const Eigen::Vector3d& p,
+                            const Eigen::Vector3d& n) {
+  return test_point(s, FrustumTerms(s), spec, scan_length_mm, p, n, true);
 }
 
 }  // namespace scancell::planner

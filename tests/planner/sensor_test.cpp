@@ -1,6 +1,7 @@
 // Sensor performance model against values computed by hand from thesis eq. 3.3-3.8.
 #include <cmath>
 #include <numbers>
+#include <random>
 
 #include <gtest/gtest.h>
 
@@ -117,6 +118,33 @@ TEST(Viewpoint, CameraFrameIsRightHandedAndTwistRotatesAboutBoresight) {
   const Eigen::Vector3d yc = camera_rotation(axis, tw).col(1);
   const Eigen::Vector3d want = (dir - dir.dot(axis) * axis).normalized();
   EXPECT_NEAR((yc - want).norm(), 0.0, 1e-12);
+}
+
+}  // namespace
+}  // namespace scancell::planner
+
+namespace scancell::planner {
+namespace {
+
+// The matrix's trig-free path must agree with eq. 3.4 and 3.8 written in angles.
+TEST(SensorModel, PointTestAgreesWithTheAngleFormulas) {
+  const SensorModel s = testing::thesis_sensor();
+  const ModelSpec spec = testing::thesis_spec();
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  int checked = 0;
+  for (int k = 0; k < 20000; ++k) {
+    const Eigen::Vector3d p(60 * u(rng), 60 * u(rng), -(275 + 130 * u(rng)));
+    Eigen::Vector3d n(u(rng), u(rng), u(rng) + 0.8);
+    n.normalize();
+    const PointTest t = test_point(s, spec, 120.0, p, n);
+    if (!t.facing || !std::isfinite(predicted_sigma_z_mm(s, t.incidence))) continue;
+    ++checked;
+    ASSERT_NEAR(t.sigma_z_mm, predicted_sigma_z_mm(s, t.incidence), 1e-12);
+    ASSERT_NEAR(t.density_per_mm2, predicted_density_per_mm2(s, t.incidence, 120.0), 1e-9);
+    ASSERT_EQ(t.compliant, t.sigma_z_mm <= spec.precision_mm && t.density_per_mm2 >= spec.density_per_mm2);
+  }
+  EXPECT_GT(checked, 5000);
 }
 
 }  // namespace
