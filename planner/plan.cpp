@@ -1,6 +1,7 @@
 #include "planner/plan.hpp"
 
 #include <chrono>
+#include <map>
 #include <cstdio>
 #include <numbers>
 #include <sstream>
@@ -41,7 +42,20 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     p.times.scene_s = since(t);
 
     t = Clock::now();
-    const auto candidates = generate_viewpoints(p.rough, scene, sensor, spec, settings.viewpoints, &p.generation);
+    auto candidates = generate_viewpoints(p.rough, scene, sensor, spec, settings.viewpoints, &p.generation);
+    // Thesis 6.3.4: with a segmented rough model, each segment also gets its single-best-view candidates
+    // (twist in 90° steps); the cover takes them when one view can do a whole patch.
+    if (!p.rough.segment.empty()) {
+      std::map<int, std::vector<std::uint32_t>> rows_of;
+      for (std::uint32_t i = 0; i < p.rough.size(); ++i)
+        if (p.rough.segment[i] >= 0) rows_of[p.rough.segment[i]].push_back(i);
+      for (const auto& [label, rows] : rows_of) {
+        const auto sbv = single_best_views(p.rough, rows, sensor, spec, 4, settings.viewpoints.standoff_factor);
+        candidates.insert(candidates.end(), sbv.begin(), sbv.end());
+        p.generation.single_best_views += sbv.size();
+      }
+      p.segments = rows_of.size();
+    }
     p.candidates = candidates.size();
     p.times.viewpoints_s = since(t);
 
@@ -154,6 +168,8 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
       {"rows_s", p.rough.size()},
       {"candidates_v", p.candidates},
       {"viewpoint_positions", p.generation.positions},
+      {"segments", p.segments},
+      {"single_best_view_candidates", p.generation.single_best_views},
       {"candidates_dropped_inside", p.generation.dropped_inside},
       {"candidates_dropped_clearance", p.generation.dropped_clearance},
       {"matrix_density", p.matrix_density},

@@ -40,6 +40,7 @@ struct ViewPlan {
   GenerationReport generation;
   MatrixStats matrix_stats;
   std::size_t candidates = 0;
+  std::size_t segments = 0;  // labelled surface patches of the rough model
   double matrix_density = 0.0;
   std::size_t matrix_bytes = 0;
   std::vector<Viewpoint> views;  // in selection order

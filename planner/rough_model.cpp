@@ -1,6 +1,8 @@
 #include "planner/rough_model.hpp"
 
 #include <algorithm>
+#include <array>
+#include <map>
 #include <cmath>
 #include <numeric>
 #include <random>
@@ -86,7 +88,10 @@ std::vector<Eigen::Vector3d> area_weighted_normals(const TriangleMesh& mesh) {
   return n;
 }
 
-RoughModel make_rough_model(const TriangleMesh& mesh) {
+RoughModel make_rough_model(const TriangleMesh& mesh, const std::vector<int>& labels) {
+  if (!labels.empty() && labels.size() != mesh.vertices.size())
+    throw ConfigError("segments: " + std::to_string(labels.size()) + " labels for " + std::to_string(mesh.vertices.size()) +
+                      " vertices");
   const std::size_t n = mesh.vertices.size();
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
   for (const auto& v : mesh.vertices) {
@@ -109,6 +114,10 @@ RoughModel make_rough_model(const TriangleMesh& mesh) {
   RoughModel rm;
   rm.points.resize(n);
   for (std::size_t i = 0; i < n; ++i) rm.points[i] = mesh.vertices[order[i]];
+  if (!labels.empty()) {
+    rm.segment.resize(n);
+    for (std::size_t i = 0; i < n; ++i) rm.segment[i] = labels[order[i]];
+  }
   rm.triangles = mesh.triangles;
   for (auto& t : rm.triangles)
     for (auto& i : t) i = rank[i];
@@ -129,8 +138,12 @@ RoughModel make_rough_model(const TriangleMesh& mesh) {
 RoughModel build_rough_model(TriangleMesh mesh, const RoughModelOptions& options, RoughModelReport* report) {
   RoughModelReport r;
   r.input_vertices = mesh.vertices.size();
+  std::vector<int> labels = options.vertex_labels;
   if (options.target_vertices && options.rho_rel)
     throw ConfigError("rough model: give either a target vertex count or rho_rel, not both");
+  if (!options.vertex_labels.empty() && options.vertex_labels.size() != mesh.vertices.size())
+    throw ConfigError("segments: " + std::to_string(options.vertex_labels.size()) + " labels for " +
+                      std::to_string(mesh.vertices.size()) + " mesh vertices");
   std::optional<std::size_t> target = options.target_vertices;
   if (options.rho_rel) {
     if (!(*options.rho_rel <= 0.0)) throw ConfigError("rough model: rho_rel must be <= 0 (a rough model is sparser)");
@@ -139,7 +152,20 @@ RoughModel build_rough_model(TriangleMesh mesh, const RoughModelOptions& options
   if (target) {
     if (*target < 4) throw ConfigError("rough model: target vertex count must be at least 4");
     if (*target < mesh.vertices.size()) {
-      mesh = decimate(mesh, *target, &r.faces_rejected_by_decimator);
+      TriangleMesh coarse = decimate(mesh, *target, &r.faces_rejected_by_decimator);
+      if (!labels.empty()) {
+        // Surviving vertices are bit-exact copies of input vertices: carry their labels across.
+        std::map<std::array<double, 3>, int> label_at;
+        for (std::size_t i = 0; i < mesh.vertices.size(); ++i)
+          label_at[{mesh.vertices[i].x(), mesh.vertices[i].y(), mesh.vertices[i].z()}] = labels[i];
+        std::vector<int> kept(coarse.vertices.size(), -1);
+        for (std::size_t i = 0; i < coarse.vertices.size(); ++i) {
+          auto it = label_at.find({coarse.vertices[i].x(), coarse.vertices[i].y(), coarse.vertices[i].z()});
+          if (it != label_at.end()) kept[i] = it->second;
+        }
+        labels = std::move(kept);
+      }
+      mesh = std::move(coarse);
       r.decimated = true;
     }
   }
@@ -154,7 +180,7 @@ RoughModel build_rough_model(TriangleMesh mesh, const RoughModelOptions& options
   }
   r.output_vertices = mesh.vertices.size();
   if (report) *report = r;
-  return make_rough_model(mesh);
+  return make_rough_model(mesh, labels);
 }
 
 }  // namespace scancell::planner

@@ -17,6 +17,7 @@ struct RoughModel {
   std::vector<Eigen::Vector3d> normals;  // unit, area-weighted vertex normals
   std::vector<double> area_mm2;          // each vertex's share (1/3) of its triangles' area
   std::vector<Triangle> triangles;
+  std::vector<int> segment;              // per row: surface patch label (thesis 3.5.1), -1 none; empty if unsegmented
   double total_area_mm2 = 0.0;
   double mean_edge_mm = 0.0;
 
@@ -29,6 +30,9 @@ struct RoughModelOptions {
   std::optional<double> rho_rel;                // --rho-rel: log2(rough density / input density), thesis 5.3
   double normal_noise_mm = 0.0;                 // σ_rm: Gaussian displacement along the normal, thesis 5.4
   std::uint64_t seed = 1;
+  /// Optional segmentation: one label per input vertex (>= 0, or -1 for none). Decimation keeps surviving
+  /// vertices where they were, so labels follow them exactly.
+  std::vector<int> vertex_labels;
 };
 
 struct RoughModelReport {
@@ -44,8 +48,9 @@ TriangleMesh decimate(const TriangleMesh& mesh, std::size_t target_vertices, std
 /// Builds the rough model: optional decimation and normal noise, then normals, areas and Morton order.
 RoughModel build_rough_model(TriangleMesh mesh, const RoughModelOptions& options, RoughModelReport* report = nullptr);
 
-/// Normals, areas and Morton ordering of an already final mesh (no decimation, no noise).
-RoughModel make_rough_model(const TriangleMesh& mesh);
+/// Normals, areas and Morton ordering of an already final mesh (no decimation, no noise); `labels`, if given,
+/// one per mesh vertex, become the rows' segments.
+RoughModel make_rough_model(const TriangleMesh& mesh, const std::vector<int>& labels = {});
 
 /// Area-weighted unit vertex normals (unnormalised face normals summed; their length is twice the area).
 std::vector<Eigen::Vector3d> area_weighted_normals(const TriangleMesh& mesh);

@@ -63,6 +63,7 @@ struct GenerationReport {
   std::size_t dropped_inside = 0;    // camera position inside the object
   std::size_t dropped_clearance = 0; // camera position closer to the object than the clearance
   std::size_t dropped_no_normal = 0;
+  std::size_t single_best_views = 0;  // added per segment (thesis 6.3.4)
 };
 
 /// Longest scan length within the sensor's range whose eq. 3.8 density still meets the spec at the given

@@ -30,6 +30,8 @@ const char* kPlanUsage =
     "  --rho-rel R               decimate to 2^R times the input vertex count (R <= 0, thesis 5.3)\n"
     "  --rough-noise-mm SIGMA    Gaussian displacement along the normal (thesis 5.4)\n"
     "  --seed N                  seed for the noise (default: settings seed)\n"
+    "  --segments FILE           surface patch label per mesh vertex (integers, -1 none), in vertex order\n"
+    "                            after welding; adds single-best-view candidates per patch (thesis 6.3.4)\n"
     "  --cover greedy|constrained   override the settings' cover mode\n"
     "  --threads N               worker threads (default all cores; the plan does not depend on it)\n"
     "  --quiet                   no summary table\n";
@@ -73,7 +75,7 @@ std::uint64_t whole(const std::map<std::string, std::string>& o, const std::stri
 int cmd_plan(int argc, char** argv) {
   const auto o = parse(argc, argv,
                        {"--mesh", "--sensor", "--spec", "--settings", "--out", "--scale", "--fit-mm", "--rough-vertices",
-                        "--rho-rel", "--rough-noise-mm", "--seed", "--cover", "--threads"},
+                        "--rho-rel", "--rough-noise-mm", "--seed", "--cover", "--threads", "--segments"},
                        {"--quiet"});
   for (const char* k : {"--mesh", "--sensor", "--spec", "--out"})
     if (!o.count(k)) throw UsageError(std::string("missing ") + k);
@@ -110,6 +112,22 @@ int cmd_plan(int argc, char** argv) {
     source.scale = sp::fit_scale(mesh, l);
   }
   sp::apply_scale(mesh, source.scale);
+  if (o.count("--segments")) {
+    const std::string& f = o.at("--segments");
+    std::ifstream in(f);
+    if (!in) throw UsageError("--segments: cannot open " + f);
+    std::string tok;
+    for (std::size_t k = 0; in >> tok; ++k) {
+      int v = 0;
+      auto [p, ec] = std::from_chars(tok.data(), tok.data() + tok.size(), v);
+      if (ec != std::errc() || p != tok.data() + tok.size() || v < -1)
+        throw UsageError(f + ": label " + std::to_string(k) + " '" + tok + "' is not an integer >= -1");
+      rough.vertex_labels.push_back(v);
+    }
+    if (rough.vertex_labels.size() != mesh.vertices.size())
+      throw UsageError(f + ": " + std::to_string(rough.vertex_labels.size()) + " labels for " +
+                       std::to_string(mesh.vertices.size()) + " mesh vertices");
+  }
 
   sp::ViewPlan plan = sp::plan_views(std::move(mesh), sensor, spec, settings, rough, threads);
   plan.object = source;

@@ -2,7 +2,6 @@
 #include <filesystem>
 #include <fstream>
 #include <numbers>
-#include <regex>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -45,10 +44,19 @@ class BadConfig : public ::testing::Test {
     path_ = fs::temp_directory_path() / ("scancell-cfg-" + std::to_string(::getpid()) + ".yaml");
   }
   void TearDown() override { fs::remove(path_); }
-  /// Loads the shipped sensor with one line replaced (regex on the whole text) and returns the error.
-  std::string error_with(const std::string& pattern, const std::string& replacement) {
-    const std::string text = std::regex_replace(good_, std::regex(pattern), replacement);
-    EXPECT_NE(text, good_) << "pattern did not match: " << pattern;
+  /// Loads the shipped sensor with the first `find` replaced (a whole line when `whole_line`) and returns the
+  /// error message.
+  std::string error_with(const std::string& find, const std::string& replacement, bool whole_line = false) {
+    std::string text = good_;
+    std::size_t at = text.find(find);
+    EXPECT_NE(at, std::string::npos) << "not in the shipped file: " << find;
+    if (at == std::string::npos) return "<pattern missing>";
+    std::size_t len = find.size();
+    if (whole_line) {
+      at = text.rfind('\n', at) + 1;
+      len = text.find('\n', at) + 1 - at;
+    }
+    text.replace(at, len, replacement);
     std::ofstream(path_) << text;
     try {
       load_sensor(path_);
@@ -62,8 +70,8 @@ class BadConfig : public ::testing::Test {
 };
 
 TEST_F(BadConfig, MissingKeyNamesItsPath) {
-  EXPECT_THAT(error_with("range_min_mm: 142[^\n]*\n", ""), HasSubstr("range_min_mm: missing"));
-  EXPECT_THAT(error_with("  cz_per_mm: [^\n]*\n", ""), HasSubstr("noise.cz_per_mm: missing"));
+  EXPECT_THAT(error_with("range_min_mm: 142", "", true), HasSubstr("range_min_mm: missing"));
+  EXPECT_THAT(error_with("cz_per_mm:", "", true), HasSubstr("noise.cz_per_mm: missing"));
 }
 
 TEST_F(BadConfig, RangeMinNotBelowRangeMax) {
@@ -73,7 +81,7 @@ TEST_F(BadConfig, RangeMinNotBelowRangeMax) {
 TEST_F(BadConfig, NegativeAndNonNumericValues) {
   EXPECT_THAT(error_with("baseline_mm: 180", "baseline_mm: -180"), HasSubstr("baseline_mm: must be > 0"));
   EXPECT_THAT(error_with("baseline_mm: 180", "baseline_mm: wide"), HasSubstr("baseline_mm: cannot read 'wide' as a number"));
-  EXPECT_THAT(error_with("t_yz_rad: [0-9.]+", "t_yz_rad: .nan"), HasSubstr("grazing.t_yz_rad: must be a finite number"));
+  EXPECT_THAT(error_with("t_yz_rad:", "  t_yz_rad: .nan\n", true), HasSubstr("grazing.t_yz_rad: must be a finite number"));
   EXPECT_THAT(error_with("samples_x: 256", "samples_x: 1"), HasSubstr("samples_x: must be >= 2"));
 }
 

@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include "planner/errors.hpp"
 #include "planner/measurability.hpp"
 #include "planner/plan.hpp"
 #include "test_meshes.hpp"
@@ -185,6 +186,45 @@ TEST(Geometry, SingleBestViewSeesAWholeSmallSegment) {
   ASSERT_EQ(views.size(), 4u);
   const auto m = build_measurability(rm, scene, testing::thesis_sensor(), testing::thesis_spec(), views);
   EXPECT_EQ(m.columns[0].count(), rm.size());
+}
+
+}  // namespace
+}  // namespace scancell::planner
+
+namespace scancell::planner {
+namespace {
+
+TEST(Geometry, SegmentsAddSingleBestViewsThatCoverAPatchInOneView) {
+  // Two separate 50 mm plates, labelled 0 and 1, each smaller than the footprint: with segments the cover
+  // may take one single-best view per plate.
+  TriangleMesh m = testing::flat_patch(50.0, 2.5);
+  const std::size_t first = m.vertices.size();
+  testing::add_grid(m, {200, -25, 0}, Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY(), 21, 21, 2.5);
+  RoughModelOptions o;
+  o.vertex_labels.assign(m.vertices.size(), 1);
+  std::fill(o.vertex_labels.begin(), o.vertex_labels.begin() + first, 0);
+  PlannerSettings st;
+  st.cover.mode = CoverMode::greedy;
+  const ViewPlan p = plan_views(m, testing::thesis_sensor(), testing::thesis_spec(), st, o);
+  EXPECT_EQ(p.segments, 2u);
+  EXPECT_EQ(p.generation.single_best_views, 8u);
+  EXPECT_EQ(p.views.size(), 2u);
+  EXPECT_DOUBLE_EQ(p.cover.cumulative_fraction.back(), 1.0);
+  // Labels must match the vertex count.
+  o.vertex_labels.pop_back();
+  EXPECT_THROW(plan_views(m, testing::thesis_sensor(), testing::thesis_spec(), st, o), ConfigError);
+}
+
+TEST(SensorModel, RandomAccessDensityUsesTheYFieldOfView) {
+  SensorModel s = testing::thesis_sensor();
+  s.kind = SensorKind::random_access;
+  s.fov_y_rad = s.fov_x_rad;
+  // Square raster: δy = δx = 142·Φ/255 = 0.262414 mm, ρ = 1 / (2 δx²) = 7.26099.
+  EXPECT_NEAR(predicted_density_per_mm2(s, {142.0, 0.0, 0.0, 0.0}, 0.0), 7.2609160, 1e-6);
+  // The receiver sits a baseline from a fixed laser at the origin, whatever the point's y.
+  const PointTest t = test_point(s, testing::thesis_spec(), 0.0, {0, 20, -150}, {0, 0, 1});
+  EXPECT_EQ(t.laser_y_mm, 0.0);
+  EXPECT_EQ(t.receiver_y_mm, 180.0);
 }
 
 }  // namespace

@@ -131,6 +131,14 @@ TEST_F(Cli, RefusesBadOptions) {
   EXPECT_EQ(run(base_args(testing::source_path("tests/data/mushroom.off"), out) + " --bogus 1").status, 2);
   EXPECT_EQ(run(base_args(testing::source_path("tests/data/mushroom.off"), out) + " --scale 2 --fit-mm 200").status, 2);
   EXPECT_EQ(run(base_args(testing::source_path("tests/data/mushroom.off"), out) + " --fit-mm 200 --rho-rel 1").status, 4);
+  const fs::path seg = dir_ / "seg.txt";
+  std::ofstream(seg) << "0 1 2\n";  // the mushroom has 2337 vertices
+  CommandResult r = run(base_args(testing::source_path("tests/data/mushroom.off"), out) + " --segments " + seg.string());
+  EXPECT_EQ(r.status, 2);
+  EXPECT_THAT(r.output, HasSubstr("3 labels for 2337 mesh vertices"));
+  std::ofstream(seg) << "0 x\n";
+  r = run(base_args(testing::source_path("tests/data/mushroom.off"), out) + " --segments " + seg.string());
+  EXPECT_THAT(r.output, HasSubstr("label 1 'x' is not an integer"));
   EXPECT_FALSE(fs::exists(out));
 }
 
