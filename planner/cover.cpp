@@ -54,16 +54,23 @@ CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>
   double covered_w = 0.0;
   std::size_t covered_n = 0;
   const bool constrained = st.mode == CoverMode::constrained;
-  // Overlap (shared rows) of every candidate with the views chosen so far: a candidate is registrable once
-  // its overlap with some single chosen view reaches t_r · m_S.
+  // Registrability (eq. 4.2) is checked lazily, only for candidates that reach the top of the heap: a
+  // candidate's overlap with each chosen view is counted once (checked_upto), and once it registers it stays
+  // registrable. A row -> columns index would do it eagerly but doubles peak memory on whole objects.
   std::vector<char> registrable(m.n_cols(), constrained ? 0 : 1);
-  const double overlap_needed = st.registration_threshold * res.max_column_count;
-  // Row -> columns index, needed to update registrability after each choice.
-  std::vector<std::vector<std::uint32_t>> row_cols;
-  if (constrained) {
-    row_cols.resize(m.n_rows);
-    for (std::uint32_t j = 0; j < m.n_cols(); ++j) m.columns[j].for_each([&](std::uint32_t r) { row_cols[r].push_back(j); });
-  }
+  std::vector<std::uint32_t> checked_upto(constrained ? m.n_cols() : 0, 0);
+  const double overlap_needed = std::max(1.0, st.registration_threshold * res.max_column_count);
+  auto registers = [&](std::uint32_t j) {
+    if (registrable[j]) return true;
+    for (std::uint32_t k = checked_upto[j]; k < res.views.size(); ++k) {
+      if (viewpoint_correlation(m.columns[j], m.columns[res.views[k]], 1) >= overlap_needed) {
+        registrable[j] = 1;
+        break;
+      }
+    }
+    checked_upto[j] = static_cast<std::uint32_t>(res.views.size());
+    return registrable[j] != 0;
+  };
 
   auto gain_of = [&](std::uint32_t j) {
     double g = 0.0;
@@ -79,7 +86,6 @@ CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>
     if (g > 0.0) heap.push({g, j, 0});
   }
   std::vector<Entry> waiting;  // fresh-best candidates that cannot register yet
-  std::vector<std::uint32_t> overlap(constrained ? m.n_cols() : 0, 0);
 
   res.stop_reason = "no candidate adds coverage";
   while (true) {
@@ -98,7 +104,7 @@ CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>
         if (e.gain > 0.0) heap.push(e);
         continue;
       }
-      if (!res.views.empty() && !registrable[e.col]) {
+      if (!res.views.empty() && !registers(e.col)) {
         ++res.blocked_by_registration;
         waiting.push_back(e);
         continue;
@@ -117,14 +123,8 @@ CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>
       res.cumulative_fraction.push_back(total > 0 ? covered_w / total : 0.0);
       res.cumulative_point_fraction.push_back(m.n_rows ? static_cast<double>(covered_n) / m.n_rows : 0.0);
       if (constrained) {
-        // Overlap with this one view only (eq. 4.2 is pairwise), recounted per new view.
-        std::fill(overlap.begin(), overlap.end(), 0u);
-        m.columns[e.col].for_each([&](std::uint32_t r) {
-          for (auto j : row_cols[r]) ++overlap[j];
-        });
-        for (std::uint32_t j = 0; j < m.n_cols(); ++j)
-          if (overlap[j] > 0 && overlap[j] >= overlap_needed) registrable[j] = 1;
-        // Waiting candidates return to the heap; their gains are now stale upper bounds.
+        // Waiting candidates return to the heap; their gains are now stale upper bounds, and the new view may
+        // be the one they register with.
         for (auto& wentry : waiting) heap.push(wentry);
         waiting.clear();
       }

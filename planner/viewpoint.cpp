@@ -101,8 +101,7 @@ double twist_towards(const Eigen::Vector3d& axis, const Eigen::Vector3d& dir) {
 }
 
 Eigen::Matrix3d Viewpoint::rotation() const {
-  // `axis` is the actual boresight; the tilt is recorded for information (the frame is rebuilt from the
-  // untilted normal in generate_viewpoints), so only twist is applied here.
+  // `axis` and `twist_rad` describe the actual frame, tilted or not; tilt_rad only records how it was made.
   return camera_rotation(axis, twist_rad);
 }
 
