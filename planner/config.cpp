@@ -102,6 +102,7 @@ Section open_root(const std::filesystem::path& file, YAML::Node& holder) {
 const char* to_string(SensorKind k) { return k == SensorKind::line_scan ? "line_scan" : "random_access"; }
 const char* to_string(ViewpointScheme s) { return s == ViewpointScheme::variable ? "variable" : "decoupled"; }
 const char* to_string(CoverMode m) { return m == CoverMode::greedy ? "greedy" : "constrained"; }
+const char* to_string(RegistrationNormalizer n) { return n == RegistrationNormalizer::max_view ? "max_view" : "smaller_view"; }
 
 void validate(const SensorModel& s, const std::string& w) {
   auto bad = [&](const std::string& key, const std::string& why) { throw ConfigError(w + ": " + key + ": " + why); };
@@ -218,6 +219,10 @@ PlannerSettings load_planner_settings(const std::filesystem::path& file) {
     else c.fail(c.key_path("mode"), "must be greedy or constrained, got '" + mode + "'");
     p.cover.registration_threshold = c.non_negative("registration_threshold", p.cover.registration_threshold);
     if (!(p.cover.registration_threshold <= 1.0)) c.fail(c.key_path("registration_threshold"), "must be in [0, 1]");
+    const std::string norm = c.get_or<std::string>("registration_normalizer", to_string(p.cover.normalizer));
+    if (norm == "max_view") p.cover.normalizer = RegistrationNormalizer::max_view;
+    else if (norm == "smaller_view") p.cover.normalizer = RegistrationNormalizer::smaller_view;
+    else c.fail(c.key_path("registration_normalizer"), "must be max_view or smaller_view, got '" + norm + "'");
     c.finish();
   }
   if (y.has("matrix")) {

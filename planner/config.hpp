@@ -29,5 +29,6 @@ void validate(const ModelSpec& spec, const std::string& where = "spec");
 const char* to_string(SensorKind k);
 const char* to_string(ViewpointScheme s);
 const char* to_string(CoverMode m);
+const char* to_string(RegistrationNormalizer n);
 
 }  // namespace scancell::planner

@@ -39,6 +39,16 @@ double viewpoint_correlation(const MeasurabilityColumn& a, const MeasurabilityCo
   return static_cast<double>(shared) / m_s;
 }
 
+double shared_weight(const MeasurabilityColumn& a, const MeasurabilityColumn& b, const std::vector<double>& w) {
+  const MeasurabilityColumn& small = a.count() <= b.count() ? a : b;
+  const MeasurabilityColumn& large = a.count() <= b.count() ? b : a;
+  double shared = 0.0;
+  small.for_each([&](std::uint32_t r) {
+    if (large.contains(r)) shared += w[r];
+  });
+  return shared;
+}
+
 CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>& w, const CoverSettings& st) {
   if (w.size() != m.n_rows) throw std::invalid_argument("greedy_cover: one weight per row required");
   CoverResult res;
@@ -47,7 +57,12 @@ CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>
   double unmeasurable_w = 0.0;
   for (auto r : res.unmeasurable_rows) unmeasurable_w += w[r];
   res.measurable_fraction = total > 0 ? (total - unmeasurable_w) / total : 0.0;
-  for (const auto& c : m.columns) res.max_column_count = std::max(res.max_column_count, c.count());
+  for (const auto& c : m.columns) {
+    res.max_column_count = std::max(res.max_column_count, c.count());
+    double cw = 0.0;
+    c.for_each([&](std::uint32_t r) { cw += w[r]; });
+    res.max_column_weight = std::max(res.max_column_weight, cw);
+  }
 
   std::vector<char> covered(m.n_rows, 0);
   std::vector<char> chosen(m.n_cols(), 0);
@@ -59,11 +74,23 @@ CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>
   // registrable. A row -> columns index would do it eagerly but doubles peak memory on whole objects.
   std::vector<char> registrable(m.n_cols(), constrained ? 0 : 1);
   std::vector<std::uint32_t> checked_upto(constrained ? m.n_cols() : 0, 0);
-  const double overlap_needed = std::max(1.0, st.registration_threshold * res.max_column_count);
+  std::vector<double> col_weight(m.n_cols(), 0.0);
+  for (std::uint32_t j = 0; j < m.n_cols(); ++j) m.columns[j].for_each([&](std::uint32_t r) { col_weight[j] += w[r]; });
+  // σ_kj ≥ t_r  <=>  shared ≥ t_r · normaliser(k, j).
+  auto needed = [&](std::uint32_t a, std::uint32_t b) {
+    return st.registration_threshold *
+           (st.normalizer == RegistrationNormalizer::max_view ? res.max_column_weight : std::min(col_weight[a], col_weight[b]));
+  };
+  auto sigma = [&](std::uint32_t a, std::uint32_t b) {
+    const double norm =
+        st.normalizer == RegistrationNormalizer::max_view ? res.max_column_weight : std::min(col_weight[a], col_weight[b]);
+    return norm > 0.0 ? shared_weight(m.columns[a], m.columns[b], w) / norm : 0.0;
+  };
   auto registers = [&](std::uint32_t j) {
     if (registrable[j]) return true;
     for (std::uint32_t k = checked_upto[j]; k < res.views.size(); ++k) {
-      if (viewpoint_correlation(m.columns[j], m.columns[res.views[k]], 1) >= overlap_needed) {
+      const double shared = shared_weight(m.columns[j], m.columns[res.views[k]], w);
+      if (shared > 0.0 && shared >= needed(j, res.views[k])) {
         registrable[j] = 1;
         break;
       }
@@ -87,6 +114,58 @@ CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>
   }
   std::vector<Entry> waiting;  // fresh-best candidates that cannot register yet
 
+  auto select = [&](std::uint32_t col, double gain) {
+    chosen[col] = 1;
+    res.views.push_back(col);
+    res.gain_weight.push_back(gain);
+    m.columns[col].for_each([&](std::uint32_t r) {
+      if (!covered[r]) {
+        covered[r] = 1;
+        covered_w += w[r];
+        ++covered_n;
+      }
+    });
+    res.cumulative_fraction.push_back(total > 0 ? covered_w / total : 0.0);
+    res.cumulative_point_fraction.push_back(m.n_rows ? static_cast<double>(covered_n) / m.n_rows : 0.0);
+    if (constrained) {
+      // Waiting candidates return to the heap; their gains are now stale upper bounds, and the new view may
+      // be the one they register with.
+      for (auto& wentry : waiting) heap.push(wentry);
+      waiting.clear();
+    }
+  };
+
+  // When every candidate that still adds coverage is too far from the plan to register, add a bridge: a
+  // view that registers with the plan and overlaps one of the best waiting candidates by t_r, preferring
+  // the bridge that itself gains most. Without it the thesis' constrained greedy stalls on objects whose
+  // large flat faces leave little overlap (fandisk: 8 views, 27 % measured).
+  auto bridge = [&]() -> bool {
+    std::vector<Entry> best = waiting;
+    std::sort(best.begin(), best.end(), [](const Entry& a, const Entry& b) { return b < a; });
+    if (best.size() > 4) best.resize(4);
+    for (const Entry& target : best) {
+      std::int64_t pick = -1;
+      double pick_gain = -1.0, pick_shared = -1.0;
+      for (std::uint32_t j = 0; j < m.n_cols(); ++j) {
+        if (chosen[j] || j == target.col) continue;
+        const double sh = shared_weight(m.columns[j], m.columns[target.col], w);
+        if (sh <= 0.0 || sh < needed(j, target.col) || !registers(j)) continue;
+        const double g = gain_of(j);
+        if (g > pick_gain || (g == pick_gain && sh > pick_shared)) {
+          pick = j;
+          pick_gain = g;
+          pick_shared = sh;
+        }
+      }
+      if (pick >= 0) {
+        select(static_cast<std::uint32_t>(pick), pick_gain);
+        ++res.bridge_views;
+        return true;
+      }
+    }
+    return false;
+  };
+
   res.stop_reason = "no candidate adds coverage";
   while (true) {
     if (total > 0 && covered_w / total >= st.coverage_goal - 1e-12) {
@@ -109,28 +188,11 @@ CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>
         waiting.push_back(e);
         continue;
       }
-      // Select e.col.
-      chosen[e.col] = 1;
-      res.views.push_back(e.col);
-      res.gain_weight.push_back(e.gain);
-      m.columns[e.col].for_each([&](std::uint32_t r) {
-        if (!covered[r]) {
-          covered[r] = 1;
-          covered_w += w[r];
-          ++covered_n;
-        }
-      });
-      res.cumulative_fraction.push_back(total > 0 ? covered_w / total : 0.0);
-      res.cumulative_point_fraction.push_back(m.n_rows ? static_cast<double>(covered_n) / m.n_rows : 0.0);
-      if (constrained) {
-        // Waiting candidates return to the heap; their gains are now stale upper bounds, and the new view may
-        // be the one they register with.
-        for (auto& wentry : waiting) heap.push(wentry);
-        waiting.clear();
-      }
+      select(e.col, e.gain);
       picked = true;
       break;
     }
+    if (!picked && constrained && !waiting.empty()) picked = bridge();
     if (!picked) {
       if (!waiting.empty()) res.stop_reason = "remaining gain needs views that cannot register (t_r)";
       break;
@@ -142,7 +204,7 @@ CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>
   UnionFind uf(n);
   for (std::uint32_t a = 0; a < n; ++a)
     for (std::uint32_t b = a + 1; b < n; ++b) {
-      const double s = viewpoint_correlation(m.columns[res.views[a]], m.columns[res.views[b]], res.max_column_count);
+      const double s = sigma(res.views[a], res.views[b]);
       if (s >= st.registration_threshold && s > 0.0) {
         res.registration_edges.push_back({a, b, s});
         uf.unite(a, b);

@@ -114,7 +114,8 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
                      {"bisector_tilt", vs.bisector_tilt}}},
                    {"cover",
                     {{"mode", to_string(p.settings.cover.mode)},
-                     {"registration_threshold", p.settings.cover.registration_threshold}}},
+                     {"registration_threshold", p.settings.cover.registration_threshold},
+                     {"registration_normalizer", to_string(p.settings.cover.normalizer)}}},
                    {"matrix", {{"ray_offset_mm", p.settings.matrix.ray_offset_mm}}}};
   Eigen::Matrix4d obj = Eigen::Matrix4d::Identity();
   obj.topLeftCorner<3, 3>() *= p.object.scale;
@@ -182,9 +183,11 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
       {"measurable_fraction", p.cover.measurable_fraction},
       {"unmeasurable_rows", p.cover.unmeasurable_rows.size()},
       {"stop_reason", p.cover.stop_reason},
+      {"bridge_views", p.cover.bridge_views},
       {"registration",
        {{"threshold", p.settings.cover.registration_threshold},
-        {"m_s", p.cover.max_column_count},
+        {"m_s_rows", p.cover.max_column_count},
+        {"m_s_area_mm2", p.cover.max_column_weight},
         {"components", p.cover.registration_components},
         {"connected", p.cover.registration_components <= 1},
         {"edges", edges}}},
@@ -215,10 +218,10 @@ std::string plan_summary(const ViewPlan& p) {
   }
   std::snprintf(buf, sizeof buf,
                 "views: %zu  estimated measurability: %.4f (area)  reachable: %.4f  unmeasurable rows: %zu  "
-                "registration: %s (%zu components, t_r %.2f)\n",
+                "registration: %s (%zu components, t_r %.2f)  stopped: %s\n",
                 p.views.size(), est, p.cover.measurable_fraction, p.cover.unmeasurable_rows.size(),
                 p.cover.registration_components <= 1 ? "connected" : "NOT connected", p.cover.registration_components,
-                p.settings.cover.registration_threshold);
+                p.settings.cover.registration_threshold, p.cover.stop_reason.c_str());
   os << buf;
   std::snprintf(buf, sizeof buf,
                 "times (s): rough %.3f  scene %.3f  viewpoints %.3f  matrix %.3f  cover %.3f  total %.3f  (%d threads)\n",
