@@ -3,8 +3,6 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
-#include <tuple>
-#include <unordered_map>
 
 #include <Eigen/Eigenvalues>
 #include <tbb/parallel_for.h>
