@@ -30,22 +30,30 @@ struct UnionFind {
 
 }  // namespace
 
-double viewpoint_correlation(const MeasurabilityColumn& a, const MeasurabilityColumn& b, std::uint32_t m_s) {
-  if (m_s == 0) return 0.0;
+namespace {
+
+/// Calls f(row) for every row two columns share (walks the smaller, probes the larger).
+template <class F>
+void for_each_shared(const MeasurabilityColumn& a, const MeasurabilityColumn& b, F&& f) {
   const MeasurabilityColumn& small = a.count() <= b.count() ? a : b;
   const MeasurabilityColumn& large = a.count() <= b.count() ? b : a;
+  small.for_each([&](std::uint32_t r) {
+    if (large.contains(r)) f(r);
+  });
+}
+
+}  // namespace
+
+double viewpoint_correlation(const MeasurabilityColumn& a, const MeasurabilityColumn& b, std::uint32_t m_s) {
+  if (m_s == 0) return 0.0;
   std::uint32_t shared = 0;
-  small.for_each([&](std::uint32_t r) { shared += large.contains(r); });
+  for_each_shared(a, b, [&](std::uint32_t) { ++shared; });
   return static_cast<double>(shared) / m_s;
 }
 
 double shared_weight(const MeasurabilityColumn& a, const MeasurabilityColumn& b, const std::vector<double>& w) {
-  const MeasurabilityColumn& small = a.count() <= b.count() ? a : b;
-  const MeasurabilityColumn& large = a.count() <= b.count() ? b : a;
   double shared = 0.0;
-  small.for_each([&](std::uint32_t r) {
-    if (large.contains(r)) shared += w[r];
-  });
+  for_each_shared(a, b, [&](std::uint32_t r) { shared += w[r]; });
   return shared;
 }
 
@@ -57,11 +65,11 @@ CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>
   double unmeasurable_w = 0.0;
   for (auto r : res.unmeasurable_rows) unmeasurable_w += w[r];
   res.measurable_fraction = total > 0 ? (total - unmeasurable_w) / total : 0.0;
-  for (const auto& c : m.columns) {
-    res.max_column_count = std::max(res.max_column_count, c.count());
-    double cw = 0.0;
-    c.for_each([&](std::uint32_t r) { cw += w[r]; });
-    res.max_column_weight = std::max(res.max_column_weight, cw);
+  std::vector<double> col_weight(m.n_cols(), 0.0);
+  for (std::uint32_t j = 0; j < m.n_cols(); ++j) {
+    m.columns[j].for_each([&](std::uint32_t r) { col_weight[j] += w[r]; });
+    res.max_column_count = std::max(res.max_column_count, m.columns[j].count());
+    res.max_column_weight = std::max(res.max_column_weight, col_weight[j]);
   }
 
   std::vector<char> covered(m.n_rows, 0);
@@ -74,16 +82,13 @@ CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>
   // registrable. A row -> columns index would do it eagerly but doubles peak memory on whole objects.
   std::vector<char> registrable(m.n_cols(), constrained ? 0 : 1);
   std::vector<std::uint32_t> checked_upto(constrained ? m.n_cols() : 0, 0);
-  std::vector<double> col_weight(m.n_cols(), 0.0);
-  for (std::uint32_t j = 0; j < m.n_cols(); ++j) m.columns[j].for_each([&](std::uint32_t r) { col_weight[j] += w[r]; });
-  // σ_kj ≥ t_r  <=>  shared ≥ t_r · normaliser(k, j).
-  auto needed = [&](std::uint32_t a, std::uint32_t b) {
-    return st.registration_threshold *
-           (st.normalizer == RegistrationNormalizer::max_view ? res.max_column_weight : std::min(col_weight[a], col_weight[b]));
+  // σ_kj = shared weight / normaliser(k, j); σ_kj ≥ t_r  <=>  shared ≥ t_r · normaliser(k, j).
+  auto normaliser = [&](std::uint32_t a, std::uint32_t b) {
+    return st.normalizer == RegistrationNormalizer::max_view ? res.max_column_weight : std::min(col_weight[a], col_weight[b]);
   };
+  auto needed = [&](std::uint32_t a, std::uint32_t b) { return st.registration_threshold * normaliser(a, b); };
   auto sigma = [&](std::uint32_t a, std::uint32_t b) {
-    const double norm =
-        st.normalizer == RegistrationNormalizer::max_view ? res.max_column_weight : std::min(col_weight[a], col_weight[b]);
+    const double norm = normaliser(a, b);
     return norm > 0.0 ? shared_weight(m.columns[a], m.columns[b], w) / norm : 0.0;
   };
   auto registers = [&](std::uint32_t j) {

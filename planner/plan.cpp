@@ -1,8 +1,8 @@
 #include "planner/plan.hpp"
 
 #include <chrono>
-#include <map>
 #include <cstdio>
+#include <map>
 #include <numbers>
 #include <sstream>
 

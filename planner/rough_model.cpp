@@ -2,8 +2,8 @@
 
 #include <algorithm>
 #include <array>
-#include <map>
 #include <cmath>
+#include <map>
 #include <numeric>
 #include <random>
 #include <sstream>
@@ -33,6 +33,12 @@ std::uint64_t spread_bits(std::uint64_t x) {  // 21 bits -> every third bit of 6
   x = (x | x << 4) & 0x10c30c30c30c30c3ull;
   x = (x | x << 2) & 0x1249249249249249ull;
   return x;
+}
+
+void check_label_count(const std::vector<int>& labels, std::size_t vertices) {
+  if (!labels.empty() && labels.size() != vertices)
+    throw ConfigError("segments: " + std::to_string(labels.size()) + " labels for " + std::to_string(vertices) +
+                      " mesh vertices");
 }
 
 }  // namespace
@@ -89,9 +95,7 @@ std::vector<Eigen::Vector3d> area_weighted_normals(const TriangleMesh& mesh) {
 }
 
 RoughModel make_rough_model(const TriangleMesh& mesh, const std::vector<int>& labels) {
-  if (!labels.empty() && labels.size() != mesh.vertices.size())
-    throw ConfigError("segments: " + std::to_string(labels.size()) + " labels for " + std::to_string(mesh.vertices.size()) +
-                      " vertices");
+  check_label_count(labels, mesh.vertices.size());
   const std::size_t n = mesh.vertices.size();
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
   for (const auto& v : mesh.vertices) {
@@ -141,9 +145,7 @@ RoughModel build_rough_model(TriangleMesh mesh, const RoughModelOptions& options
   std::vector<int> labels = options.vertex_labels;
   if (options.target_vertices && options.rho_rel)
     throw ConfigError("rough model: give either a target vertex count or rho_rel, not both");
-  if (!options.vertex_labels.empty() && options.vertex_labels.size() != mesh.vertices.size())
-    throw ConfigError("segments: " + std::to_string(options.vertex_labels.size()) + " labels for " +
-                      std::to_string(mesh.vertices.size()) + " mesh vertices");
+  check_label_count(labels, mesh.vertices.size());
   std::optional<std::size_t> target = options.target_vertices;
   if (options.rho_rel) {
     if (!(*options.rho_rel <= 0.0)) throw ConfigError("rough model: rho_rel must be <= 0 (a rough model is sparser)");

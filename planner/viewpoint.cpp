@@ -138,11 +138,7 @@ std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const Occlus
   const std::size_t n_positions =
       decoupled ? std::max<std::size_t>(1, rough.size() / static_cast<std::size_t>(st.position_decimation)) : rough.size();
   const double normal_weight_mm = sensor.optimal_standoff_mm * std::tan(0.5 * sensor.fov_x_rad);
-  std::vector<std::uint32_t> target_rows = n_positions < rough.size()
-                                               ? farthest_point_sample(rough, n_positions, normal_weight_mm)
-                                               : std::vector<std::uint32_t>{};
-  if (target_rows.empty())
-    for (std::uint32_t i = 0; i < rough.size(); ++i) target_rows.push_back(i);
+  std::vector<std::uint32_t> target_rows = farthest_point_sample(rough, n_positions, normal_weight_mm);
   std::sort(target_rows.begin(), target_rows.end());  // candidate order follows the rows, not the sampling order
   std::vector<Eigen::Vector3d> target_normals;
   for (auto r : target_rows) target_normals.push_back(rough.normals[r]);
@@ -222,6 +218,7 @@ std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const Occlus
       const double scan = design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad);
       // VARIABLE twist: put the receiver (camera +y) as far as possible from the patch plane.
       const double base_twist = twist_towards(-n, patch.plane_normal);
+      const double tilt = 0.5 * std::atan2(sensor.baseline_mm, standoff);  // half the triangulation angle
       for (int level = 0; level < d_t; ++level) {
         Viewpoint v;
         v.position = position;
@@ -233,7 +230,6 @@ std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const Occlus
         v.twist_level = level;
         per_position[k].push_back(v);
         if (st.bisector_tilt) {
-          const double tilt = 0.5 * std::atan2(sensor.baseline_mm, standoff);
           const Eigen::Matrix3d rt = camera_rotation(v.axis, v.twist_rad, tilt);
           Viewpoint t = v;
           t.axis = -rt.col(2);
