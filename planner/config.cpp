@@ -97,6 +97,17 @@ Section open_root(const std::filesystem::path& file, YAML::Node& holder) {
   return Section(holder, file.string(), "");
 }
 
+Section parse_root(const std::string& text, const std::string& where, YAML::Node& holder) {
+  try {
+    holder = YAML::Load(text);
+  } catch (const YAML::Exception& e) {
+    throw ConfigError(where + ": invalid YAML/JSON at line " + std::to_string(e.mark.line + 1) + ", column " +
+                      std::to_string(e.mark.column + 1) + ": " + e.msg);
+  }
+  if (!holder || holder.IsNull()) throw ConfigError(where + ": empty");
+  return Section(holder, where, "");
+}
+
 }  // namespace
 
 const char* to_string(SensorKind k) { return k == SensorKind::line_scan ? "line_scan" : "random_access"; }
@@ -133,17 +144,18 @@ void validate(const ModelSpec& s, const std::string& w) {
   if (!(s.coverage_goal > 0.0 && s.coverage_goal <= 1.0)) bad("coverage_goal", "must be in (0, 1]");
 }
 
-SensorModel load_sensor(const std::filesystem::path& file) {
-  YAML::Node root;
-  Section y = open_root(file, root);
+namespace {
+
+SensorModel sensor_from(Section& y, const std::string& where, const std::string& default_name) {
   SensorModel s;
-  s.name = y.get_or<std::string>("name", file.stem().string());
+  s.name = y.get_or<std::string>("name", default_name);
   const std::string kind = y.get<std::string>("kind");
   if (kind == "line_scan") s.kind = SensorKind::line_scan;
   else if (kind == "random_access") s.kind = SensorKind::random_access;
   else y.fail("kind", "must be line_scan or random_access, got '" + kind + "'");
   s.fov_x_rad = y.positive("fov_x_rad");
   if (s.kind == SensorKind::random_access) s.fov_y_rad = y.positive("fov_y_rad");
+  else s.fov_y_rad = y.non_negative("fov_y_rad", 0.0);  // plan files carry it for every kind; unused here
   s.range_min_mm = y.positive("range_min_mm");
   s.range_max_mm = y.positive("range_max_mm");
   if (!(s.range_min_mm < s.range_max_mm)) y.fail("range_max_mm", "must be greater than range_min_mm");
@@ -152,6 +164,9 @@ SensorModel load_sensor(const std::filesystem::path& file) {
   if (s.kind == SensorKind::line_scan) {
     s.scan_length_min_mm = y.positive("scan_length_min_mm");
     s.scan_length_max_mm = y.positive("scan_length_max_mm");
+  } else {
+    s.scan_length_min_mm = y.non_negative("scan_length_min_mm", 0.0);
+    s.scan_length_max_mm = y.non_negative("scan_length_max_mm", 0.0);
   }
   s.samples_x = y.get<int>("samples_x");
   s.samples_y = y.get<int>("samples_y");
@@ -169,21 +184,45 @@ SensorModel load_sensor(const std::filesystem::path& file) {
     g.finish();
   }
   y.finish();
-  validate(s, file.string());
+  validate(s, where);
   return s;
+}
+
+ModelSpec spec_from(Section& y, const std::string& where, const std::string& default_name) {
+  ModelSpec s;
+  s.name = y.get_or<std::string>("name", default_name);
+  s.precision_mm = y.positive("precision_mm");
+  s.density_per_mm2 = y.positive("density_per_mm2");
+  s.coverage_goal = y.get_or<double>("coverage_goal", 1.0);
+  y.finish();
+  validate(s, where);
+  return s;
+}
+
+}  // namespace
+
+SensorModel load_sensor(const std::filesystem::path& file) {
+  YAML::Node root;
+  Section y = open_root(file, root);
+  return sensor_from(y, file.string(), file.stem().string());
+}
+
+SensorModel parse_sensor(const std::string& text, const std::string& where) {
+  YAML::Node root;
+  Section y = parse_root(text, where, root);
+  return sensor_from(y, where, "sensor");
+}
+
+ModelSpec parse_spec(const std::string& text, const std::string& where) {
+  YAML::Node root;
+  Section y = parse_root(text, where, root);
+  return spec_from(y, where, "spec");
 }
 
 ModelSpec load_spec(const std::filesystem::path& file) {
   YAML::Node root;
   Section y = open_root(file, root);
-  ModelSpec s;
-  s.name = y.get_or<std::string>("name", file.stem().string());
-  s.precision_mm = y.positive("precision_mm");
-  s.density_per_mm2 = y.positive("density_per_mm2");
-  s.coverage_goal = y.get_or<double>("coverage_goal", 1.0);
-  y.finish();
-  validate(s, file.string());
-  return s;
+  return spec_from(y, file.string(), file.stem().string());
 }
 
 PlannerSettings load_planner_settings(const std::filesystem::path& file) {

@@ -22,6 +22,10 @@ SensorModel load_sensor(const std::filesystem::path& file);
 ModelSpec load_spec(const std::filesystem::path& file);
 PlannerSettings load_planner_settings(const std::filesystem::path& file);
 
+/// The same from YAML or JSON text (a plan file's `sensor` / `spec` objects); `where` prefixes messages.
+SensorModel parse_sensor(const std::string& text, const std::string& where);
+ModelSpec parse_spec(const std::string& text, const std::string& where);
+
 /// The same checks load_* apply, for models built in code; throws ConfigError naming the key.
 void validate(const SensorModel& sensor, const std::string& where = "sensor");
 void validate(const ModelSpec& spec, const std::string& where = "spec");

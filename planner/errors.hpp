@@ -16,4 +16,10 @@ struct ConfigError : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+/// A data file (plan, range image) that is malformed, truncated or inconsistent; the message names the file
+/// and the element.
+struct DataError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
 }  // namespace scancell::planner

@@ -91,7 +91,42 @@ std::optional<Hit> OcclusionScene::first_hit(const Eigen::Vector3d& origin, cons
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
   rtcIntersect1(scene_, &ctx, &rh);
   if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return std::nullopt;
-  return Hit{rh.ray.tfar, rh.hit.primID, Eigen::Vector3d(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z)};
+  return Hit{rh.ray.tfar, rh.hit.primID, Eigen::Vector3d(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z), rh.hit.u, rh.hit.v};
+}
+
+void OcclusionScene::first_hits(const OcclusionRay* rays, std::size_t count, Hit* hits) const {
+  constexpr std::size_t kStream = 256;
+  RTCRayHit buf[kStream];
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  for (std::size_t base = 0; base < count; base += kStream) {
+    const std::size_t m = std::min(kStream, count - base);
+    for (std::size_t i = 0; i < m; ++i) {
+      const OcclusionRay& r = rays[base + i];
+      RTCRayHit& e = buf[i];
+      e.ray.org_x = r.origin.x(); e.ray.org_y = r.origin.y(); e.ray.org_z = r.origin.z();
+      e.ray.dir_x = r.dir.x(); e.ray.dir_y = r.dir.y(); e.ray.dir_z = r.dir.z();
+      e.ray.tnear = r.t_near;
+      e.ray.tfar = r.t_far;
+      e.ray.time = 0.0f;
+      e.ray.mask = 0xFFFFFFFFu;
+      e.ray.id = static_cast<unsigned>(i);
+      e.ray.flags = 0;
+      e.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+      e.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    }
+    rtcIntersect1M(scene_, &ctx, buf, static_cast<unsigned>(m), sizeof(RTCRayHit));
+    for (std::size_t i = 0; i < m; ++i) {
+      const RTCRayHit& e = buf[i];
+      Hit& h = hits[base + i];
+      if (e.hit.geomID == RTC_INVALID_GEOMETRY_ID) {
+        h = Hit{std::numeric_limits<double>::infinity(), kNoHit, Eigen::Vector3d::Zero(), 0.0f, 0.0f};
+      } else {
+        h = Hit{e.ray.tfar, e.hit.primID, Eigen::Vector3d(e.hit.Ng_x, e.hit.Ng_y, e.hit.Ng_z), e.hit.u, e.hit.v};
+      }
+    }
+  }
 }
 
 }  // namespace scancell::planner

@@ -23,7 +23,11 @@ struct Hit {
   double t;                  // distance along the (unit) ray
   std::uint32_t triangle;    // primitive id
   Eigen::Vector3d geometric_normal;  // unnormalised, as Embree reports it (winding order)
+  float u = 0.0f, v = 0.0f;  // barycentrics: point = (1-u-v)·v0 + u·v1 + v·v2
 };
+
+/// Triangle id of a ray that hit nothing.
+inline constexpr std::uint32_t kNoHit = 0xFFFFFFFFu;
 
 class OcclusionScene {
  public:
@@ -37,6 +41,10 @@ class OcclusionScene {
   void occluded(const OcclusionRay* rays, std::size_t count, std::uint8_t* occluded) const;
 
   bool occluded1(const OcclusionRay& ray) const;
+
+  /// First hits of a batch of rays (rtcIntersect1M, coherent: one laser profile or one image row at a time).
+  /// hits[i].triangle == kNoHit when ray i hits nothing in [t_near, t_far]; t is in units of |dir|.
+  void first_hits(const OcclusionRay* rays, std::size_t count, Hit* hits) const;
 
   /// First hit along a unit direction within [t_near, t_far], if any.
   std::optional<Hit> first_hit(const Eigen::Vector3d& origin, const Eigen::Vector3d& unit_dir, double t_near,

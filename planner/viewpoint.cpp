@@ -98,6 +98,18 @@ double twist_towards(const Eigen::Vector3d& axis, const Eigen::Vector3d& dir) {
   return t < 0.0 ? t + kTwoPi : t;
 }
 
+Viewpoint viewpoint_from_pose(const Eigen::Matrix3d& r, const Eigen::Vector3d& position, double scan_length_mm) {
+  Viewpoint v;
+  const Eigen::Vector3d zc = r.col(2).normalized();
+  v.axis = -zc;
+  const Eigen::Vector3d x0 = twist_reference_x(zc);
+  const Eigen::Vector3d y0 = zc.cross(x0);
+  v.twist_rad = std::atan2(r.col(0).dot(y0), r.col(0).dot(x0));
+  v.position = position;
+  v.scan_length_mm = scan_length_mm;
+  return v;
+}
+
 Eigen::Matrix3d Viewpoint::rotation() const {
   // `axis` and `twist_rad` describe the actual frame, tilted or not; tilt_rad only records how it was made.
   return camera_rotation(axis, twist_rad);

@@ -37,6 +37,11 @@ Eigen::Matrix3d camera_rotation(const Eigen::Vector3d& axis, double twist_rad, d
 /// Twist zero is a fixed reference: camera x = normalize(u × z_c) with u = object +Z (object +X when the
 /// boresight is within ~25° of Z), camera y = z_c × x. Twist rotates x towards y about z_c = -axis.
 Eigen::Matrix3d camera_rotation(const Eigen::Vector3d& axis, double twist_rad);
+/// The viewpoint whose frame is the given camera-to-object rotation and origin (axis and twist recovered; any
+/// rotation is one axis and one twist). standoff, target_row and tilt are left at their defaults.
+Viewpoint viewpoint_from_pose(const Eigen::Matrix3d& camera_to_object, const Eigen::Vector3d& position,
+                              double scan_length_mm);
+
 /// The twist that puts the camera +y (the baseline, receiver side) along the component of dir ⊥ axis.
 double twist_towards(const Eigen::Vector3d& axis, const Eigen::Vector3d& dir);
 

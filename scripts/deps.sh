@@ -6,7 +6,7 @@ PKGS=(
   build-essential cmake pkg-config ccache
   libeigen3-dev libembree-dev libassimp-dev libopenmesh-dev libtbb-dev
   libyaml-cpp-dev nlohmann-json3-dev
-  libgtest-dev libgmock-dev libbenchmark-dev
+  libgtest-dev libgmock-dev libbenchmark-dev libpng-dev
 )
 missing=()
 for p in "${PKGS[@]}"; do

@@ -10,8 +10,13 @@
 #include <string>
 #include <vector>
 
+#include <tbb/info.h>
+#include <tbb/task_arena.h>
+
 #include "planner/errors.hpp"
 #include "planner/plan.hpp"
+#include "planner/plan_file.hpp"
+#include "planner/verify.hpp"
 
 namespace sp = scancell::planner;
 
@@ -35,6 +40,25 @@ const char* kPlanUsage =
     "  --cover greedy|constrained   override the settings' cover mode\n"
     "  --threads N               worker threads (default all cores; the plan does not depend on it)\n"
     "  --quiet                   no summary table\n";
+
+const char* kVerifyUsage =
+    "usage: scancell verify --plan PLAN.json [--fine MESH] [options]\n"
+    "  executes the plan with the virtual scanner on the fine model and reports verified measurability m_v\n"
+    "  --fine FILE                fine model (default: the plan's object.mesh)\n"
+    "  --scale K | --fit-mm L     place the fine model with this scale instead of the plan's object transform\n"
+    "  --seed N                   noise / pose-error seed (default 1)\n"
+    "  --no-noise                 noise-free range images\n"
+    "  --pose-error-mm S          positioner translation error, sigma per axis (mm)\n"
+    "  --pose-error-rad S         positioner rotation error, sigma per axis (rad)\n"
+    "  --no-analytic              skip the analytic m_v on the fine mesh\n"
+    "  --report FILE.json         per-view and total figures as JSON\n"
+    "  --coverage-ply FILE.ply    fine mesh coloured measured (grey) / not (red)\n"
+    "  --png FILE.png             measurability projection from +X -X +Y -Y +Z -Z\n"
+    "  --threads N                worker threads (default all cores)\n"
+    "  --quiet                    no table\n"
+    "usage: scancell scan --plan PLAN.json --view K --out IMAGE.ply [--fine MESH] [--scale K | --fit-mm L] "
+    "[--seed N] [--no-noise]\n"
+    "  one view of the plan through the virtual scanner, saved as a range image (docs/range-image-format.md)\n";
 
 /// Simple --key value parser that refuses unknown or repeated options.
 std::map<std::string, std::string> parse(int argc, char** argv, const std::vector<std::string>& with_value,
@@ -70,6 +94,18 @@ std::uint64_t whole(const std::map<std::string, std::string>& o, const std::stri
   auto [p, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
   if (ec != std::errc() || p != s.data() + s.size()) throw UsageError(key + ": '" + s + "' is not a whole number >= 0");
   return v;
+}
+
+/// Writes to a temporary file and renames, so a reader never sees half a file.
+void write_json(const std::string& out, const nlohmann::json& j) {
+  const std::string tmp = out + ".tmp";
+  {
+    std::ofstream f(tmp, std::ios::trunc);
+    if (!f) throw std::runtime_error(out + ": cannot open for writing");
+    f << j.dump(2) << '\n';
+    if (!f.flush()) throw std::runtime_error(out + ": write failed");
+  }
+  if (std::rename(tmp.c_str(), out.c_str()) != 0) throw std::runtime_error(out + ": cannot rename " + tmp + ": " + std::strerror(errno));
 }
 
 int cmd_plan(int argc, char** argv) {
@@ -134,17 +170,106 @@ int cmd_plan(int argc, char** argv) {
   if (plan.rough_report.faces_rejected_by_decimator)
     std::cerr << "scancell: decimator rejected " << plan.rough_report.faces_rejected_by_decimator << " non-manifold faces\n";
 
-  // Write to a temporary file and rename, so a reader never sees half a plan.
-  const std::string out = o.at("--out");
-  const std::string tmp = out + ".tmp";
-  {
-    std::ofstream f(tmp, std::ios::trunc);
-    if (!f) throw std::runtime_error(out + ": cannot open for writing");
-    f << sp::plan_to_json(plan).dump(2) << '\n';
-    if (!f.flush()) throw std::runtime_error(out + ": write failed");
-  }
-  if (std::rename(tmp.c_str(), out.c_str()) != 0) throw std::runtime_error(out + ": cannot rename " + tmp + ": " + std::strerror(errno));
+  write_json(o.at("--out"), sp::plan_to_json(plan));
   if (!o.count("--quiet")) std::cout << sp::plan_summary(plan);
+  return 0;
+}
+
+/// The fine model placed in the plan's object frame: the plan's recorded transform, or --scale / --fit-mm.
+sp::TriangleMesh place_fine(const sp::PlanFile& plan, const std::map<std::string, std::string>& o) {
+  const std::string path = o.count("--fine") ? o.at("--fine") : plan.mesh_path;
+  if (o.count("--scale") && o.count("--fit-mm")) throw UsageError("give --scale or --fit-mm, not both");
+  sp::TriangleMesh mesh = sp::load_mesh(path);
+  if (o.count("--scale") || o.count("--fit-mm")) {
+    const double k = o.count("--scale") ? number(o, "--scale") : sp::fit_scale(mesh, number(o, "--fit-mm"));
+    if (!(k > 0.0)) throw UsageError("--scale / --fit-mm must be > 0");
+    sp::apply_scale(mesh, k);
+  } else {
+    for (auto& v : mesh.vertices) v = (plan.object_transform * v.homogeneous()).head<3>();
+  }
+  return mesh;
+}
+
+int cmd_verify(int argc, char** argv) {
+  const auto o = parse(argc, argv,
+                       {"--plan", "--fine", "--scale", "--fit-mm", "--seed", "--pose-error-mm", "--pose-error-rad",
+                        "--report", "--coverage-ply", "--png", "--threads"},
+                       {"--no-noise", "--no-analytic", "--quiet"});
+  if (!o.count("--plan")) throw UsageError("missing --plan");
+  const sp::PlanFile plan = sp::load_plan_file(o.at("--plan"));
+  const sp::TriangleMesh fine = place_fine(plan, o);
+  sp::VerifyOptions opt;
+  if (o.count("--seed")) opt.seed = whole(o, "--seed");
+  opt.noise = !o.count("--no-noise");
+  opt.analytic = !o.count("--no-analytic");
+  if (o.count("--pose-error-mm")) opt.pose_error_mm = number(o, "--pose-error-mm");
+  if (o.count("--pose-error-rad")) opt.pose_error_rad = number(o, "--pose-error-rad");
+  if (opt.pose_error_mm < 0.0 || opt.pose_error_rad < 0.0) throw UsageError("pose errors must be >= 0");
+  const int threads = o.count("--threads") ? static_cast<int>(whole(o, "--threads")) : 0;
+  tbb::task_arena arena(threads > 0 ? threads : tbb::info::default_concurrency());
+  sp::Verification v;
+  arena.execute([&] { v = sp::verify_views(fine, plan.sensor, plan.spec, plan.views, plan.estimated_cumulative, opt); });
+  if (o.count("--report")) {
+    nlohmann::json views = nlohmann::json::array();
+    for (std::size_t k = 0; k < v.views.size(); ++k) {
+      const auto& w = v.views[k];
+      views.push_back({{"index", k},
+                       {"samples", w.scan.samples},
+                       {"compliant_samples", w.compliant_samples},
+                       {"rays", w.scan.rays},
+                       {"missed", w.scan.missed},
+                       {"too_close", w.scan.too_close},
+                       {"back_facing", w.scan.back_facing},
+                       {"beyond_grazing", w.scan.beyond_grazing},
+                       {"receiver_occluded", w.scan.receiver_occluded},
+                       {"alone_area_mm2", w.alone_mm2},
+                       {"gain_area_mm2", w.gain_mm2},
+                       {"unique_area_mm2", w.unique_mm2},
+                       {"cumulative_verified_measurability", w.cumulative},
+                       {"cumulative_analytic_measurability", w.cumulative_analytic},
+                       {"cumulative_estimated_measurability", std::isfinite(w.cumulative_estimated) ? nlohmann::json(w.cumulative_estimated) : nlohmann::json()}});
+    }
+    nlohmann::json r = {{"format", "scancell-verification"},
+                        {"version", 1},
+                        {"plan", plan.path},
+                        {"fine_vertices", fine.vertices.size()},
+                        {"fine_area_mm2", v.area_mm2},
+                        {"seed", opt.seed},
+                        {"noise", opt.noise},
+                        {"pose_error_mm", opt.pose_error_mm},
+                        {"pose_error_rad", opt.pose_error_rad},
+                        {"verified_measurability", v.mv},
+                        {"analytic_measurability", opt.analytic ? nlohmann::json(v.mv_analytic) : nlohmann::json()},
+                        {"estimated_measurability", std::isfinite(v.estimated) ? nlohmann::json(v.estimated) : nlohmann::json()},
+                        {"views", views},
+                        {"seconds", v.seconds}};
+    write_json(o.at("--report"), r);
+  }
+  if (o.count("--coverage-ply")) sp::write_coverage_ply(fine, v.measured, o.at("--coverage-ply"));
+  if (o.count("--png")) sp::write_measurability_png(fine, v.measured, o.at("--png"));
+  if (!o.count("--quiet")) std::cout << sp::verification_summary(v);
+  return 0;
+}
+
+int cmd_scan(int argc, char** argv) {
+  const auto o = parse(argc, argv, {"--plan", "--view", "--out", "--fine", "--scale", "--fit-mm", "--seed"}, {"--no-noise"});
+  for (const char* k : {"--plan", "--view", "--out"})
+    if (!o.count(k)) throw UsageError(std::string("missing ") + k);
+  const sp::PlanFile plan = sp::load_plan_file(o.at("--plan"));
+  const std::uint64_t k = whole(o, "--view");
+  if (k >= plan.views.size())
+    throw UsageError("--view " + std::to_string(k) + ": the plan has " + std::to_string(plan.views.size()) + " views");
+  const sp::TriangleMesh fine = place_fine(plan, o);
+  const sp::OcclusionScene scene(fine);
+  sp::ScanOptions so;
+  so.seed = sp::mix_seed(o.count("--seed") ? whole(o, "--seed") : 1, k, 0);
+  so.noise = !o.count("--no-noise");
+  sp::ScanStats st;
+  const sp::RangeImage img = sp::virtual_scan(scene, plan.sensor, plan.views[k], so, &st);
+  sp::save_range_image(img, o.at("--out"));
+  std::cout << "view " << k << ": " << st.samples << " samples of " << st.rays << " rays (missed " << st.missed
+            << ", too close " << st.too_close << ", back-facing " << st.back_facing << ", beyond grazing "
+            << st.beyond_grazing << ", receiver occluded " << st.receiver_occluded << ")\n";
   return 0;
 }
 
@@ -152,23 +277,27 @@ int cmd_plan(int argc, char** argv) {
 
 int main(int argc, char** argv) {
   if (argc < 2 || !std::strcmp(argv[1], "--help") || !std::strcmp(argv[1], "-h")) {
-    std::cerr << "usage: scancell COMMAND [options]\ncommands:\n  plan    plan the views that measure an object to a specification\n\n"
-              << kPlanUsage;
+    std::cerr << "usage: scancell COMMAND [options]\ncommands:\n"
+                 "  plan    plan the views that measure an object to a specification\n"
+                 "  verify  execute a plan with the virtual scanner on the fine model: verified measurability\n"
+                 "  scan    one view of a plan through the virtual scanner, saved as a range image\n\n"
+              << kPlanUsage << kVerifyUsage;
     return argc < 2 ? 2 : 0;
   }
   const std::string cmd = argv[1];
+  const char* usage = cmd == "plan" ? kPlanUsage : kVerifyUsage;
   try {
-    if (cmd == "plan") {
-      if (argc == 3 && (!std::strcmp(argv[2], "--help") || !std::strcmp(argv[2], "-h"))) {
-        std::cout << kPlanUsage;
-        return 0;
-      }
-      return cmd_plan(argc - 2, argv + 2);
+    if (argc == 3 && (!std::strcmp(argv[2], "--help") || !std::strcmp(argv[2], "-h"))) {
+      std::cout << usage;
+      return 0;
     }
+    if (cmd == "plan") return cmd_plan(argc - 2, argv + 2);
+    if (cmd == "verify") return cmd_verify(argc - 2, argv + 2);
+    if (cmd == "scan") return cmd_scan(argc - 2, argv + 2);
     std::cerr << "scancell: unknown command '" << cmd << "'\n";
     return 2;
   } catch (const UsageError& e) {
-    std::cerr << "scancell " << cmd << ": " << e.what() << "\n" << kPlanUsage;
+    std::cerr << "scancell " << cmd << ": " << e.what() << "\n" << usage;
     return 2;
   } catch (const sp::MeshError& e) {
     std::cerr << "scancell: mesh error: " << e.what() << "\n";
@@ -176,6 +305,9 @@ int main(int argc, char** argv) {
   } catch (const sp::ConfigError& e) {
     std::cerr << "scancell: config error: " << e.what() << "\n";
     return 4;
+  } catch (const sp::DataError& e) {
+    std::cerr << "scancell: data error: " << e.what() << "\n";
+    return 5;
   } catch (const std::exception& e) {
     std::cerr << "scancell: error: " << e.what() << "\n";
     return 1;
