@@ -167,5 +167,44 @@ TEST_F(Cli, WritesADocumentedPlan) {
   EXPECT_FALSE(fs::exists(out.string() + ".tmp"));
 }
 
+TEST_F(Cli, VerifiesAPlanAndWritesReportCoverageAndProjection) {
+  const fs::path plan = dir_ / "plan.json";
+  ASSERT_EQ(run(base_args(testing::source_path("tests/data/mushroom.off"), plan) + " --fit-mm 200 --rough-vertices 600 --quiet").status, 0);
+  const fs::path report = dir_ / "report.json", ply = dir_ / "coverage.ply", png = dir_ / "coverage.png";
+  // The plan records the mesh path and its transform: no --fine or scale needed.
+  const CommandResult r = run("verify --plan " + plan.string() + " --report " + report.string() + " --coverage-ply " +
+                              ply.string() + " --png " + png.string());
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("verified m_v"));
+  std::ifstream in(report);
+  const auto j = nlohmann::json::parse(in);
+  EXPECT_EQ(j["format"], "scancell-verification");
+  const double mv = j["verified_measurability"], est = j["estimated_measurability"];
+  EXPECT_GT(mv, 0.97);
+  EXPECT_NEAR(mv, est, 0.03);
+  std::ifstream p(plan);
+  EXPECT_EQ(j["views"].size(), nlohmann::json::parse(p)["views"].size());
+  EXPECT_GT(fs::file_size(ply), 1000u);
+  std::ifstream pngf(png, std::ios::binary);
+  char magic[8] = {};
+  pngf.read(magic, 8);
+  EXPECT_EQ(std::string(magic + 1, 3), "PNG");
+  // One view to a range image.
+  const CommandResult s = run("scan --plan " + plan.string() + " --view 0 --out " + (dir_ / "v0.ply").string());
+  ASSERT_EQ(s.status, 0) << s.output;
+  EXPECT_THAT(s.output, HasSubstr("samples of 65536 rays"));
+  EXPECT_EQ(run("scan --plan " + plan.string() + " --view 999 --out " + (dir_ / "v.ply").string()).status, 2);
+}
+
+TEST_F(Cli, VerifyRefusesADamagedPlanWithItsPath) {
+  const fs::path plan = dir_ / "plan.json";
+  std::ofstream(plan) << "{\"format\": \"scancell-plan\", \"version\": 1, \"object\": {\"mesh\": 3}}";
+  const CommandResult r = run("verify --plan " + plan.string());
+  EXPECT_EQ(r.status, 5) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("object.mesh: must be a string"));
+  EXPECT_EQ(run("verify --plan " + (dir_ / "none.json").string()).status, 5);
+  EXPECT_EQ(run("verify").status, 2);
+}
+
 }  // namespace
 }  // namespace scancell::planner
