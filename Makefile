@@ -5,7 +5,7 @@ JOBS       ?= $(shell nproc)
 CMAKE      ?= cmake
 SCANCELL    = $(BUILD)/tools/scancell
 
-.PHONY: all deps build test test-asan demo bench clean
+.PHONY: all deps build test test-asan demo bench quality clean
 
 all: build
 
@@ -37,6 +37,10 @@ demo: build
 
 bench: build
 	$(BUILD)/bench/bench_planner
+
+# Plan quality against turntable programs and a view sphere, verified by the virtual scanner (docs/quality.md).
+quality: build
+	cd $(BUILD) && ./bench/bench_quality --csv quality.csv
 
 clean:
 	rm -rf $(BUILD) $(ASAN_BUILD) $(BUILD).configure.log $(ASAN_BUILD).configure.log

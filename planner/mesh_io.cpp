@@ -241,3 +241,71 @@ double triangle_area(const TriangleMesh& mesh, const Triangle& t) {
 }
 
 }  // namespace scancell::planner
+
+namespace scancell::planner {
+
+TriangleMesh refine_edges(const TriangleMesh& mesh, double max_edge_mm) {
+  if (!(max_edge_mm > 0.0)) throw std::invalid_argument("refine_edges: max_edge_mm must be > 0");
+  TriangleMesh m = mesh;
+  const double limit2 = max_edge_mm * max_edge_mm;
+  for (int pass = 0; pass < 64; ++pass) {
+    std::unordered_map<std::uint64_t, std::uint32_t> mid;
+    auto key = [](std::uint32_t a, std::uint32_t b) {
+      return a < b ? (std::uint64_t{a} << 32 | b) : (std::uint64_t{b} << 32 | a);
+    };
+    // Mark: one midpoint per long edge, shared by both triangles, so the split stays conforming.
+    for (const auto& t : m.triangles)
+      for (int k = 0; k < 3; ++k) {
+        const std::uint32_t a = t[k], b = t[(k + 1) % 3];
+        if ((m.vertices[a] - m.vertices[b]).squaredNorm() <= limit2) continue;
+        if (mid.emplace(key(a, b), 0).second) {
+          mid[key(a, b)] = static_cast<std::uint32_t>(m.vertices.size());
+          const Eigen::Vector3d midpoint = 0.5 * (m.vertices[a] + m.vertices[b]);  // evaluate before push_back
+          m.vertices.push_back(midpoint);
+        }
+      }
+    if (mid.empty()) return m;
+    std::vector<Triangle> next;
+    next.reserve(m.triangles.size() * 2);
+    for (const auto& t : m.triangles) {
+      std::array<std::int64_t, 3> e;  // midpoint of edge (t[k], t[k+1]) or -1
+      int marked = 0;
+      for (int k = 0; k < 3; ++k) {
+        const auto it = mid.find(key(t[k], t[(k + 1) % 3]));
+        e[k] = it == mid.end() ? std::int64_t{-1} : std::int64_t{it->second};
+        marked += e[k] >= 0;
+      }
+      auto M = [&](int k) { return static_cast<std::uint32_t>(e[k]); };
+      if (marked == 0) {
+        next.push_back(t);
+      } else if (marked == 3) {
+        next.push_back({t[0], M(0), M(2)});
+        next.push_back({M(0), t[1], M(1)});
+        next.push_back({M(2), M(1), t[2]});
+        next.push_back({M(0), M(1), M(2)});
+      } else if (marked == 1) {
+        const int k = e[0] >= 0 ? 0 : e[1] >= 0 ? 1 : 2;  // split edge (t[k], t[k+1]) against t[k+2]
+        const std::uint32_t a = t[k], b = t[(k + 1) % 3], c = t[(k + 2) % 3];
+        next.push_back({a, M(k), c});
+        next.push_back({M(k), b, c});
+      } else {
+        const int k = e[0] < 0 ? 0 : e[1] < 0 ? 1 : 2;  // the unsplit edge (t[k], t[k+1])
+        const std::uint32_t a = t[k], b = t[(k + 1) % 3], c = t[(k + 2) % 3];
+        const std::uint32_t mbc = M((k + 1) % 3), mca = M((k + 2) % 3);
+        next.push_back({mbc, c, mca});  // the corner at c
+        // The quad a, b, mbc, mca: cut along its shorter diagonal.
+        if ((m.vertices[a] - m.vertices[mbc]).squaredNorm() <= (m.vertices[b] - m.vertices[mca]).squaredNorm()) {
+          next.push_back({a, b, mbc});
+          next.push_back({a, mbc, mca});
+        } else {
+          next.push_back({a, b, mca});
+          next.push_back({b, mbc, mca});
+        }
+      }
+    }
+    m.triangles = std::move(next);
+  }
+  throw std::runtime_error("refine_edges: did not converge in 64 passes");
+}
+
+}  // namespace scancell::planner

@@ -10,6 +10,8 @@
 
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 #include <OpenMesh/Tools/Decimater/DecimaterT.hh>
+#include <OpenMesh/Tools/Decimater/ModEdgeLengthT.hh>
+#include <OpenMesh/Tools/Decimater/ModNormalFlippingT.hh>
 #include <OpenMesh/Tools/Decimater/ModQuadricT.hh>
 
 #include "planner/errors.hpp"
@@ -54,10 +56,25 @@ TriangleMesh decimate(const TriangleMesh& mesh, std::size_t target_vertices, std
   }
   if (faces_rejected) *faces_rejected = rejected;
 
+  om.request_face_normals();  // ModNormalFlipping compares face normals before and after each collapse
+  om.update_face_normals();
   OpenMesh::Decimater::DecimaterT<OMesh> decimater(om);
   OpenMesh::Decimater::ModQuadricT<OMesh>::Handle quadric;
   decimater.add(quadric);
   decimater.module(quadric).unset_max_err();
+  // A rough model stands in for a rough scan, which samples the surface roughly evenly. Pure quadric
+  // decimation turns flat regions into a few huge (and sometimes flipped) triangles: one viewpoint position and
+  // one averaged normal for a region larger than the sensor footprint. So no collapse may flip a face or turn
+  // one by more than 60°, and no edge longer than twice the even spacing for the target count may collapse.
+  OpenMesh::Decimater::ModNormalFlippingT<OMesh>::Handle flipping;
+  decimater.add(flipping);
+  decimater.module(flipping).set_max_normal_deviation(60.0);
+  double area = 0.0;
+  for (const auto& t : mesh.triangles) area += triangle_area(mesh, t);
+  const double even_edge = std::sqrt(2.0 * area / (std::sqrt(3.0) * std::max<std::size_t>(target_vertices, 1)));
+  OpenMesh::Decimater::ModEdgeLengthT<OMesh>::Handle edge_length;
+  decimater.add(edge_length);
+  decimater.module(edge_length).set_edge_length(2.0 * even_edge);
   if (!decimater.initialize()) throw MeshError("decimation: OpenMesh decimater failed to initialise");
   decimater.decimate_to(target_vertices);
   om.garbage_collection();

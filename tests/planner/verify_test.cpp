@@ -195,6 +195,22 @@ TEST(Synthetic, ClosedShapesAreWatertightWithTheirVolume) {
   EXPECT_NEAR(volume(tube), tube_volume, 0.005 * tube_volume);
 }
 
+TEST(Synthetic, EdgeRefinementKeepsTheSurfaceAndItsTopology) {
+  const sp::TriangleMesh coarse = sp::box_with_blind_hole({120, 80, 60}, 30, 30, 20.0);
+  const sp::TriangleMesh fine = sp::refine_edges(coarse, 1.5);
+  EXPECT_TRUE(closed_and_oriented(fine));
+  EXPECT_NEAR(volume(fine), volume(coarse), 1e-6 * volume(coarse));
+  double area_c = 0, area_f = 0, longest = 0;
+  for (const auto& t : coarse.triangles) area_c += sp::triangle_area(coarse, t);
+  for (const auto& t : fine.triangles) {
+    area_f += sp::triangle_area(fine, t);
+    for (int k = 0; k < 3; ++k) longest = std::max(longest, (fine.vertices[t[k]] - fine.vertices[t[(k + 1) % 3]]).norm());
+  }
+  EXPECT_NEAR(area_f, area_c, 1e-6 * area_c);
+  EXPECT_LE(longest, 1.5);
+  EXPECT_GT(fine.vertices.size(), 10 * coarse.vertices.size());
+}
+
 TEST(Synthetic, PatchesHaveTheirDepthToWidthRatio) {
   const sp::TriangleMesh cavity = sp::cavity_patch(60, 46, 0.5, 1.0);
   double zmin = 0.0, zmax = -1.0;

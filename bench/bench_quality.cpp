@@ -1,0 +1,275 @@
+// Plan-quality benchmark (thesis ch. 5 experiments and docs/quality.md): every synthetic object and every
+// mesh in ../shared/meshes, a rough model at ρ_rel = −5 with σ_rm = 0.005·R_min, planned by 3M (greedy and
+// constrained greedy t_r = 0.2) and by what an operator would run instead (fixed turntable programs, a
+// set-covered view sphere), all verified by the same virtual scanner on the fine model.
+//
+//   bench_quality [--meshes DIR] [--only a,b] [--csv FILE] [--refine-mm E] [--seed N] [--threads N] [--quick]
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <iostream>
+#include <map>
+#include <numbers>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <tbb/info.h>
+#include <tbb/task_arena.h>
+
+#include "planner/baselines.hpp"
+#include "planner/config.hpp"
+#include "planner/plan.hpp"
+#include "planner/synthetic.hpp"
+#include "planner/verify.hpp"
+
+namespace sp = scancell::planner;
+namespace fs = std::filesystem;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+struct Object {
+  std::string name;
+  std::function<sp::TriangleMesh()> make;
+};
+
+struct Row {
+  std::string object, family, method;
+  std::size_t fine_vertices = 0, rough_vertices = 0;
+  double r_f = 0.0;
+  std::size_t views = 0;
+  double estimated = std::nan(""), mv = 0.0, mv_analytic = 0.0, unmeasurable = std::nan("");
+  double plan_s = 0.0, verify_s = 0.0;
+  std::vector<double> progression;  // verified cumulative m_v per view
+};
+
+std::string fmt(double v, const char* f = "%.4f") {
+  if (!std::isfinite(v)) return "-";
+  char b[32];
+  std::snprintf(b, sizeof b, f, v);
+  return b;
+}
+
+/// Views needed to reach m_v >= target along a progression (0 when never).
+std::size_t views_to_reach(const std::vector<double>& prog, double target) {
+  for (std::size_t k = 0; k < prog.size(); ++k)
+    if (prog[k] >= target - 1e-9) return k + 1;
+  return 0;
+}
+double mv_at(const std::vector<double>& prog, std::size_t views) {
+  if (prog.empty() || views == 0) return 0.0;
+  return prog[std::min(views, prog.size()) - 1];
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string meshes_dir = std::string(SCANCELL_SOURCE_DIR) + "/../shared/meshes";
+  std::string csv_path = "quality.csv";
+  std::set<std::string> only;
+  double refine_mm = 2.0;
+  std::uint64_t seed = 1;
+  int threads = 0;
+  bool quick = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) { std::cerr << a << " needs a value\n"; std::exit(2); }
+      return argv[++i];
+    };
+    if (a == "--meshes") meshes_dir = value();
+    else if (a == "--csv") csv_path = value();
+    else if (a == "--refine-mm") refine_mm = std::stod(value());
+    else if (a == "--seed") seed = std::stoull(value());
+    else if (a == "--threads") threads = std::stoi(value());
+    else if (a == "--quick") quick = true;
+    else if (a == "--only") {
+      std::stringstream ss(value());
+      for (std::string t; std::getline(ss, t, ',');) only.insert(t);
+    } else {
+      std::cerr << "usage: bench_quality [--meshes DIR] [--only a,b] [--csv FILE] [--refine-mm E] [--seed N] [--threads N] [--quick]\n";
+      return 2;
+    }
+  }
+  const sp::SensorModel sensor = sp::load_sensor(std::string(SCANCELL_SOURCE_DIR) + "/config/sensors/line-scan-thesis.yaml");
+  const sp::ModelSpec spec = sp::load_spec(std::string(SCANCELL_SOURCE_DIR) + "/config/spec/thesis.yaml");
+  const double fs_mm2 = sp::sensor_footprint_mm2(sensor, spec);
+
+  // ---- objects ----
+  std::vector<Object> objects;
+  objects.push_back({"convex-patch-dw0.04", [&] { return sp::convex_patch(std::sqrt(2.55 * fs_mm2), 0.04, 1.0); }});
+  for (double dw : {0.1, 0.3, 0.5, 0.7, 1.0}) {
+    char name[48];
+    std::snprintf(name, sizeof name, "cavity-dw%.1f", dw);
+    objects.push_back({name, [&, dw] {
+                         const double plate = std::sqrt(0.55 * fs_mm2);
+                         return sp::cavity_patch(plate, 0.8 * plate, dw, 0.5);
+                       }});
+  }
+  objects.push_back({"box-blind-hole", [] { return sp::box_with_blind_hole({120, 80, 60}, 30, 30, 1.5); }});
+  objects.push_back({"tube-bore", [] { return sp::cylinder_with_bore(80, 50, 50, 1.5); }});
+  std::vector<fs::path> files;
+  if (fs::is_directory(meshes_dir))
+    for (const auto& e : fs::directory_iterator(meshes_dir))
+      if (e.path().extension() == ".off") files.push_back(e.path());
+  std::sort(files.begin(), files.end());
+  for (const auto& f : files)
+    objects.push_back({f.stem().string(), [f, refine_mm] {
+                         sp::TriangleMesh m = sp::load_mesh(f);
+                         sp::apply_scale(m, sp::fit_scale(m, 200.0));
+                         return sp::refine_edges(m, refine_mm);
+                       }});
+
+  const int n_threads = threads > 0 ? threads : tbb::info::default_concurrency();
+  tbb::task_arena arena(n_threads);
+  std::vector<Row> rows;
+  std::printf("sensor %s, spec %.3f mm / %.1f samples/mm2, F_s %.0f mm2, rough rho_rel -5, sigma_rm %.3f mm, seed %llu, %d threads\n",
+              sensor.name.c_str(), spec.precision_mm, spec.density_per_mm2, fs_mm2, 0.005 * sensor.range_min_mm,
+              static_cast<unsigned long long>(seed), n_threads);
+  std::printf("%-20s %-26s %6s %6s %9s %9s %9s %8s %14s %8s %8s\n", "object", "method", "views", "rows", "est_m", "m_v",
+              "m_v_anal", "unmeas", "views_95/99/99.9", "plan_s", "verif_s");
+
+  arena.execute([&] {
+    for (const auto& obj : objects) {
+      if (!only.empty() && !only.count(obj.name)) continue;
+      const sp::TriangleMesh fine = obj.make();
+      double area = 0.0;
+      for (const auto& t : fine.triangles) area += sp::triangle_area(fine, t);
+      sp::RoughModelOptions rough;
+      rough.rho_rel = -5.0;
+      rough.normal_noise_mm = 0.005 * sensor.range_min_mm;
+      rough.seed = seed;
+
+      auto emit = [&](Row r) {
+        r.object = obj.name;
+        r.fine_vertices = fine.vertices.size();
+        r.r_f = area / fs_mm2;
+        char reach[48];
+        auto v = [&](double t) { const auto n = views_to_reach(r.progression, t); return n ? std::to_string(n) : std::string("-"); };
+        std::snprintf(reach, sizeof reach, "%s/%s/%s", v(0.95).c_str(), v(0.99).c_str(), v(0.999).c_str());
+        std::printf("%-20s %-26s %6zu %6zu %9s %9.4f %9.4f %8s %14s %8.2f %8.2f\n", r.object.c_str(), r.method.c_str(), r.views,
+                    r.rough_vertices, fmt(r.estimated).c_str(), r.mv, r.mv_analytic, fmt(r.unmeasurable).c_str(), reach,
+                    r.plan_s, r.verify_s);
+        std::fflush(stdout);
+        rows.push_back(std::move(r));
+      };
+      auto verify = [&](Row& r, const std::vector<sp::Viewpoint>& views, const std::vector<double>& est) {
+        std::vector<sp::ScanPose> poses;
+        for (const auto& v : views) poses.push_back(sp::scan_pose(v));
+        sp::VerifyOptions vo;
+        vo.seed = seed;
+        const auto t = Clock::now();
+        const sp::Verification v = sp::verify_views(fine, sensor, spec, poses, est, vo);
+        r.verify_s = since(t);
+        r.views = views.size();
+        r.mv = v.mv;
+        r.mv_analytic = v.mv_analytic;
+        for (const auto& w : v.views) r.progression.push_back(w.cumulative);
+      };
+
+      // 3M, plain and constrained greedy.
+      for (const auto mode : {sp::CoverMode::greedy, sp::CoverMode::constrained}) {
+        sp::PlannerSettings settings;
+        settings.seed = seed;
+        settings.cover.mode = mode;
+        settings.cover.registration_threshold = 0.2;
+        Row r;
+        r.family = "3M";
+        r.method = mode == sp::CoverMode::greedy ? "3M greedy" : "3M constrained t_r=0.2";
+        const auto t = Clock::now();
+        const sp::ViewPlan plan = sp::plan_views(fine, sensor, spec, settings, rough);
+        r.plan_s = since(t);
+        r.rough_vertices = plan.rough.size();
+        r.estimated = plan.cover.cumulative_fraction.empty() ? 0.0 : plan.cover.cumulative_fraction.back();
+        r.unmeasurable = 1.0 - plan.cover.measurable_fraction;
+        verify(r, plan.views, plan.cover.cumulative_fraction);
+        emit(std::move(r));
+      }
+
+      // Fixed turntable programs.
+      const std::vector<std::vector<double>> elevation_sets = {
+          {30.0}, {-30.0, 30.0}, {-45.0, 0.0, 45.0}};
+      const std::vector<int> steps = quick ? std::vector<int>{8, 24} : std::vector<int>{4, 6, 8, 12, 16, 24};
+      for (const auto& set : elevation_sets)
+        for (int k : steps) {
+          std::vector<double> el;
+          for (double d : set) el.push_back(d * std::numbers::pi / 180.0);
+          Row r;
+          r.family = "turntable";
+          r.method = "turntable " + std::to_string(k) + "x" + std::to_string(set.size());
+          verify(r, sp::turntable_program(fine, sensor, spec, k, el), {});
+          emit(std::move(r));
+        }
+
+      // View sphere, set-covered by the same greedy on the same rough model and measurability test.
+      for (int sub : {2, 3}) {
+        Row r;
+        r.family = "view sphere";
+        r.method = "view sphere s" + std::to_string(sub) + " x8 twists";
+        const auto t = Clock::now();
+        const sp::RoughModel rm = sp::build_rough_model(fine, rough);
+        const sp::OcclusionScene scene(rm.mesh());
+        const auto cands = sp::view_sphere_candidates(fine, sensor, spec, sub, 8);
+        const auto m = sp::build_measurability(rm, scene, sensor, spec, cands);
+        sp::CoverSettings cs;
+        cs.mode = sp::CoverMode::greedy;
+        const sp::CoverResult cover = sp::greedy_cover(m, rm.area_mm2, cs);
+        r.plan_s = since(t);
+        r.rough_vertices = rm.size();
+        r.estimated = cover.cumulative_fraction.empty() ? 0.0 : cover.cumulative_fraction.back();
+        r.unmeasurable = 1.0 - cover.measurable_fraction;
+        std::vector<sp::Viewpoint> views;
+        for (auto j : cover.views) views.push_back(cands[j]);
+        verify(r, views, cover.cumulative_fraction);
+        emit(std::move(r));
+      }
+    }
+  });
+
+  // ---- CSV ----
+  {
+    std::ofstream csv(csv_path);
+    csv << "object,fine_vertices,r_f,method,views,rough_vertices,estimated_m,verified_m_v,analytic_m_v,"
+           "unmeasurable_share,views_to_mv_0.95,views_to_mv_0.99,views_to_mv_0.999,plan_s,verify_s\n";
+    for (const auto& r : rows)
+      csv << r.object << ',' << r.fine_vertices << ',' << fmt(r.r_f, "%.3f") << ',' << r.method << ',' << r.views << ','
+          << r.rough_vertices << ',' << fmt(r.estimated) << ',' << fmt(r.mv) << ',' << fmt(r.mv_analytic) << ','
+          << fmt(r.unmeasurable) << ',' << views_to_reach(r.progression, 0.95) << ','
+          << views_to_reach(r.progression, 0.99) << ',' << views_to_reach(r.progression, 0.999) << ',' << fmt(r.plan_s, "%.3f") << ',' << fmt(r.verify_s, "%.3f") << '\n';
+  }
+
+  // ---- comparison per object ----
+  std::printf("\nper object: best turntable program (highest m_v, then fewest views) vs 3M greedy and the view sphere\n");
+  std::printf("%-20s %5s %-16s %5s %7s | %5s %7s %9s %11s | %-10s %5s %7s\n", "object", "r_f", "turntable best", "views",
+              "m_v", "3M", "m_v", "3M_to_TT", "3M_m@TTviews", "sphere", "views", "m_v");
+  std::map<std::string, std::vector<const Row*>> by_object;
+  std::vector<std::string> order;
+  for (const auto& r : rows) {
+    if (!by_object.count(r.object)) order.push_back(r.object);
+    by_object[r.object].push_back(&r);
+  }
+  for (const auto& name : order) {
+    const Row *tt = nullptr, *g = nullptr, *sph = nullptr;
+    for (const Row* r : by_object[name]) {
+      if (r->family == "turntable" && (!tt || r->mv > tt->mv + 1e-9 || (std::abs(r->mv - tt->mv) <= 1e-9 && r->views < tt->views))) tt = r;
+      if (r->method == "3M greedy") g = r;
+      if (r->family == "view sphere" && (!sph || r->mv > sph->mv)) sph = r;
+    }
+    if (!tt || !g || !sph) continue;
+    const std::size_t reach = views_to_reach(g->progression, tt->mv);
+    std::printf("%-20s %5.2f %-16s %5zu %7.4f | %5zu %7.4f %9s %11.4f | %-10s %5zu %7.4f\n", name.c_str(), g->r_f,
+                tt->method.c_str(), tt->views, tt->mv, g->views, g->mv, reach ? std::to_string(reach).c_str() : "never",
+                mv_at(g->progression, tt->views), sph->method.substr(12, 2).c_str(), sph->views, sph->mv);
+  }
+  std::printf("\n3M_to_TT: 3M greedy views to reach the best turntable program's m_v; 3M_m@TTviews: 3M's m_v after as many "
+              "views as that program has (all of them if fewer). CSV: %s\n", csv_path.c_str());
+  return 0;
+}
