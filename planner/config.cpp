@@ -248,6 +248,11 @@ PlannerSettings load_planner_settings(const std::filesystem::path& file) {
     if (!(vs.scan_length_design_incidence_rad < 1.5)) v.fail(v.key_path("scan_length_design_incidence_rad"), "must be < 1.5");
     vs.clearance_mm = v.non_negative("clearance_mm", vs.clearance_mm);
     vs.bisector_tilt = v.get_or<bool>("bisector_tilt", vs.bisector_tilt);
+    vs.open_direction_views = v.get_or<bool>("open_direction_views", vs.open_direction_views);
+    vs.open_direction_standoffs = v.get_or<int>("open_direction_standoffs", vs.open_direction_standoffs);
+    if (vs.open_direction_standoffs < 1 || vs.open_direction_standoffs > 16) v.fail(v.key_path("open_direction_standoffs"), "must be in [1, 16]");
+    vs.open_directions_per_row = v.get_or<int>("open_directions_per_row", vs.open_directions_per_row);
+    if (vs.open_directions_per_row < 1 || vs.open_directions_per_row > 64) v.fail(v.key_path("open_directions_per_row"), "must be in [1, 64]");
     v.finish();
   }
   if (y.has("cover")) {

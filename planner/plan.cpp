@@ -60,7 +60,28 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     p.times.viewpoints_s = since(t);
 
     t = Clock::now();
-    const auto matrix = build_measurability(p.rough, scene, sensor, spec, candidates, settings.matrix, &p.matrix_stats);
+    auto matrix = build_measurability(p.rough, scene, sensor, spec, candidates, settings.matrix, &p.matrix_stats);
+    // Rows nothing measures: add open-direction views for them (deep holes, undercuts) and their columns.
+    const auto unmeasurable = matrix.unmeasurable_rows();
+    p.generation.rows_unmeasurable_before = unmeasurable.size();
+    if (settings.viewpoints.open_direction_views && !unmeasurable.empty()) {
+      const std::size_t max_rows = std::max<std::size_t>(16, p.rough.size() / static_cast<std::size_t>(std::max(1, settings.viewpoints.position_decimation)));
+      const auto extra = open_direction_viewpoints(p.rough, scene, sensor, spec, settings.viewpoints, unmeasurable, max_rows,
+                                                   &p.generation.open_direction_rows);
+      MatrixStats extra_stats;
+      auto more = build_measurability(p.rough, scene, sensor, spec, extra, settings.matrix, &extra_stats);
+      p.generation.open_direction_candidates = extra.size();
+      candidates.insert(candidates.end(), extra.begin(), extra.end());
+      for (auto& c : more.columns) matrix.columns.push_back(std::move(c));
+      p.matrix_stats.pairs_total += extra_stats.pairs_total;
+      p.matrix_stats.pairs_block_culled += extra_stats.pairs_block_culled;
+      p.matrix_stats.pairs_in_frustum += extra_stats.pairs_in_frustum;
+      p.matrix_stats.pairs_surviving += extra_stats.pairs_surviving;
+      p.matrix_stats.pairs_compliant += extra_stats.pairs_compliant;
+      p.matrix_stats.rays_cast += extra_stats.rays_cast;
+      p.matrix_stats.pairs_measurable += extra_stats.pairs_measurable;
+      p.candidates = candidates.size();
+    }
     p.matrix_density = matrix.density();
     p.matrix_bytes = matrix.memory_bytes();
     p.times.matrix_s = since(t);
@@ -111,7 +132,10 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
                      {"standoff_adjust_max_mm", vs.standoff_adjust_max_mm},
                      {"scan_length_design_incidence_rad", vs.scan_length_design_incidence_rad},
                      {"clearance_mm", vs.clearance_mm},
-                     {"bisector_tilt", vs.bisector_tilt}}},
+                     {"bisector_tilt", vs.bisector_tilt},
+                     {"open_direction_views", vs.open_direction_views},
+                     {"open_direction_standoffs", vs.open_direction_standoffs},
+                     {"open_directions_per_row", vs.open_directions_per_row}}},
                    {"cover",
                     {{"mode", to_string(p.settings.cover.mode)},
                      {"registration_threshold", p.settings.cover.registration_threshold},
@@ -171,6 +195,9 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
       {"viewpoint_positions", p.generation.positions},
       {"segments", p.segments},
       {"single_best_view_candidates", p.generation.single_best_views},
+      {"rows_unmeasurable_by_first_candidates", p.generation.rows_unmeasurable_before},
+      {"open_direction_rows", p.generation.open_direction_rows},
+      {"open_direction_candidates", p.generation.open_direction_candidates},
       {"candidates_dropped_inside", p.generation.dropped_inside},
       {"candidates_dropped_clearance", p.generation.dropped_clearance},
       {"matrix_density", p.matrix_density},

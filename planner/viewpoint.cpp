@@ -5,6 +5,7 @@
 #include <numbers>
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
@@ -262,6 +263,120 @@ std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const Occlus
   }
   rep.candidates = out.size();
   if (report) *report = rep;
+  return out;
+}
+
+std::vector<Viewpoint> open_direction_viewpoints(const RoughModel& rough, const OcclusionScene& scene,
+                                                 const SensorModel& sensor, const ModelSpec& spec,
+                                                 const ViewpointSettings& st, const std::vector<std::uint32_t>& rows,
+                                                 std::size_t max_rows, std::size_t* targeted_rows) {
+  if (rows.empty() || max_rows == 0) {
+    if (targeted_rows) *targeted_rows = 0;
+    return {};
+  }
+  // Spread the targets: farthest-point order over the given rows (position and normal, as for RM_v).
+  std::vector<std::uint32_t> targets;
+  {
+    const double w2 = std::pow(sensor.optimal_standoff_mm * std::tan(0.5 * sensor.fov_x_rad), 2);
+    // Targets closer than a quarter of the footprint width to one another add nothing a neighbour's views
+    // do not: stop there, so a cluster of unmeasurable rows (a hole) gets a few targets, not one per row.
+    const double min_spacing2 = std::pow(0.5 * sensor.optimal_standoff_mm * std::tan(0.5 * sensor.fov_x_rad), 2);
+    std::vector<double> d2(rows.size(), std::numeric_limits<double>::infinity());
+    std::size_t next = 0;
+    while (targets.size() < std::min(max_rows, rows.size())) {
+      targets.push_back(rows[next]);
+      const Eigen::Vector3d p = rough.points[rows[next]], nn = rough.normals[rows[next]];
+      double best = -1.0;
+      for (std::size_t i = 0; i < rows.size(); ++i) {
+        d2[i] = std::min(d2[i], (rough.points[rows[i]] - p).squaredNorm() + w2 * (rough.normals[rows[i]] - nn).squaredNorm());
+        if (d2[i] > best) best = d2[i], next = i;
+      }
+      if (best < min_spacing2) break;
+    }
+    std::sort(targets.begin(), targets.end());
+  }
+  if (targeted_rows) *targeted_rows = targets.size();
+
+  const double r_near = sensor.optimal_standoff_mm * st.standoff_factor;
+  // Not all the way to the precision limit: views there comply only at normal incidence and verify poorly.
+  const double r_far = std::max(r_near, std::min(sensor.range_max_mm, max_range_for_precision_mm(sensor, spec)) * 0.8);
+  const int levels = std::max(1, st.open_direction_standoffs);
+  // Probe directions: a Fibonacci spiral on the cap within the stricter grazing limit of the normal.
+  const double cap = 0.9 * std::min(sensor.grazing_xz_rad, sensor.grazing_yz_rad);
+  constexpr int kProbes = 96;
+  std::vector<Eigen::Vector3d> local;  // around +Z
+  for (int i = 0; i < kProbes; ++i) {
+    const double cz = 1.0 - (1.0 - std::cos(cap)) * (i + 0.5) / kProbes;
+    const double sz = std::sqrt(std::max(0.0, 1.0 - cz * cz));
+    const double az = i * std::numbers::pi * (3.0 - std::sqrt(5.0));
+    local.emplace_back(sz * std::cos(az), sz * std::sin(az), cz);
+  }
+  const double eps = 0.01 * rough.mean_edge_mm + 1e-3;
+
+  std::vector<std::vector<Viewpoint>> per_row(targets.size());
+  tbb::parallel_for(std::size_t{0}, targets.size(), [&](std::size_t k) {
+    const Eigen::Vector3d p = rough.points[targets[k]], n = rough.normals[targets[k]];
+    if (n.squaredNorm() < 0.5) return;
+    const Eigen::Quaterniond to_n = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), n);
+    std::vector<Eigen::Vector3d> open;
+    for (const auto& l : local) {
+      const Eigen::Vector3d d = to_n * l;
+      if (!scene.first_hit(p + eps * n, d, 0.0, r_far)) open.push_back(d);
+    }
+    if (open.empty()) return;
+    // Keep a spread subset: start nearest the normal, then farthest-first on the sphere.
+    std::vector<Eigen::Vector3d> keep;
+    std::size_t first = 0;
+    for (std::size_t i = 1; i < open.size(); ++i)
+      if (open[i].dot(n) > open[first].dot(n)) first = i;
+    keep.push_back(open[first]);
+    while (keep.size() < static_cast<std::size_t>(std::max(1, st.open_directions_per_row)) && keep.size() < open.size()) {
+      std::size_t best = 0;
+      double best_d = -1.0;
+      for (std::size_t i = 0; i < open.size(); ++i) {
+        double nearest = 4.0;
+        for (const auto& q : keep) nearest = std::min(nearest, (open[i] - q).squaredNorm());
+        if (nearest > best_d) best_d = nearest, best = i;
+      }
+      if (best_d <= 1e-12) break;
+      keep.push_back(open[best]);
+    }
+    for (const auto& d : keep)
+      for (int s = 0; s < levels; ++s) {
+        const double standoff = levels == 1 ? r_near : r_near + (r_far - r_near) * s / (levels - 1);
+        const Eigen::Vector3d position = p + standoff * d;
+        double nearest2 = std::numeric_limits<double>::infinity();
+        for (const auto& q : rough.points) nearest2 = std::min(nearest2, (q - position).squaredNorm());
+        if (nearest2 < st.clearance_mm * st.clearance_mm) continue;
+        const double scan = design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad);
+        const double tilt = 0.5 * std::atan2(sensor.baseline_mm, standoff);
+        for (int level = 0; level < st.twist_levels; ++level) {
+          Viewpoint v;
+          v.position = position;
+          v.axis = -d;
+          v.twist_rad = kTwoPi * level / st.twist_levels;
+          v.standoff_mm = standoff;
+          v.scan_length_mm = scan;
+          v.target_row = static_cast<std::int32_t>(targets[k]);
+          v.twist_level = level;
+          per_row[k].push_back(v);
+          if (st.bisector_tilt) {
+            // Laser and receiver rays straddling the open direction: both fit a narrow opening.
+            const Eigen::Matrix3d rt = camera_rotation(v.axis, v.twist_rad, tilt);
+            Viewpoint t = v;
+            t.axis = -rt.col(2);
+            t.twist_rad = twist_towards(t.axis, rt.col(1));
+            t.position = p + standoff * rt.col(2);
+            t.tilt_rad = tilt;
+            double near2 = std::numeric_limits<double>::infinity();
+            for (const auto& q : rough.points) near2 = std::min(near2, (q - t.position).squaredNorm());
+            if (near2 >= st.clearance_mm * st.clearance_mm) per_row[k].push_back(t);
+          }
+        }
+      }
+  });
+  std::vector<Viewpoint> out;
+  for (auto& v : per_row) out.insert(out.end(), v.begin(), v.end());
   return out;
 }
 

@@ -60,6 +60,13 @@ struct ViewpointSettings {
   /// put the laser along the normal and the receiver a full triangulation angle off it, which cannot see the
   /// floor of a cavity as deep as it is wide; the bisecting view can.
   bool bisector_tilt = true;
+  /// Rows no candidate measures get a second chance (open-direction viewpoints): views along the directions
+  /// from which the point is actually open to the outside, at stand-offs from f_d·R_o out to the longest
+  /// range that still meets the precision spec. A longer stand-off narrows the triangulation angle, which is
+  /// what lets a bi-static sensor see the floor of a hole as deep as it is wide.
+  bool open_direction_views = true;
+  int open_direction_standoffs = 3;   // stand-off levels between f_d·R_o and the precision-limited range
+  int open_directions_per_row = 5;    // open directions kept per targeted row
 };
 
 struct GenerationReport {
@@ -69,6 +76,9 @@ struct GenerationReport {
   std::size_t dropped_clearance = 0; // camera position closer to the object than the clearance
   std::size_t dropped_no_normal = 0;
   std::size_t single_best_views = 0;  // added per segment (thesis 6.3.4)
+  std::size_t open_direction_rows = 0;        // unmeasurable rows targeted by open-direction views
+  std::size_t open_direction_candidates = 0;  // candidates added for them
+  std::size_t rows_unmeasurable_before = 0;   // rows no candidate measured before they were added
 };
 
 /// Longest scan length within the sensor's range whose eq. 3.8 density still meets the spec at the given
@@ -84,6 +94,17 @@ std::vector<std::uint32_t> farthest_point_sample(const RoughModel& rough, std::s
 std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const OcclusionScene& scene,
                                            const SensorModel& sensor, const ModelSpec& spec,
                                            const ViewpointSettings& settings, GenerationReport* report = nullptr);
+
+/// Open-direction viewpoints for `rows` (typically those no ordinary candidate measures): for each targeted
+/// row (farthest-point sampled, at most `max_rows`), directions within the grazing limits of its normal are
+/// probed with rays; the open ones (nothing hit out to the precision-limited range) are thinned to
+/// settings.open_directions_per_row spread directions, and each gets views at settings.open_direction_standoffs
+/// stand-offs and settings.twist_levels twists, looking back along the direction. Deterministic.
+std::vector<Viewpoint> open_direction_viewpoints(const RoughModel& rough, const OcclusionScene& scene,
+                                                 const SensorModel& sensor, const ModelSpec& spec,
+                                                 const ViewpointSettings& settings,
+                                                 const std::vector<std::uint32_t>& rows, std::size_t max_rows,
+                                                 std::size_t* targeted_rows = nullptr);
 
 /// Thesis 6.3.4 single-best-view candidates for one segment (rows of the rough model): axis opposite the
 /// segment's mean normal, position dilated from the segment's centre vertex far enough that the segment fits

@@ -156,9 +156,14 @@ double sample_density_per_mm2(const RangeImage& img, int i, int j) {
     const RangeSample& o = img.at(a, b);
     return o.valid() ? static_cast<double>((o.object_mm - c.object_mm).norm()) : std::numeric_limits<double>::infinity();
   };
-  // The nearer neighbour: across a depth jump the far side's chord says nothing about this surface's sampling.
-  const double dx = std::min(chord(i - 1, j), chord(i + 1, j));
-  const double dy = std::min(chord(i, j - 1), chord(i, j + 1));
+  // The mean of the two chords (the minimum would be biased low by the range noise), unless one is a jump
+  // (over twice the other): across a depth step the far side says nothing about this surface's sampling.
+  auto spacing = [](double a, double b) {
+    if (!std::isfinite(a) || !std::isfinite(b)) return std::min(a, b);
+    return std::max(a, b) > 2.0 * std::min(a, b) ? std::min(a, b) : 0.5 * (a + b);
+  };
+  const double dx = spacing(chord(i - 1, j), chord(i + 1, j));
+  const double dy = spacing(chord(i, j - 1), chord(i, j + 1));
   if (!std::isfinite(dx) || !std::isfinite(dy)) return 0.0;
   const double d2 = dx * dx + dy * dy;
   return d2 > 0.0 ? 1.0 / d2 : 0.0;

@@ -69,7 +69,8 @@ RangeImage virtual_scan(const OcclusionScene& scene, const SensorModel& sensor, 
                         const ScanOptions& options = {}, ScanStats* stats = nullptr);
 
 /// Local sampling density of sample (i, j) from the measured samples themselves: the eq. 3.5-3.8 chords δx, δy
-/// are the distances to the nearer valid neighbour along the profile and across profiles; ρ = 1/(δx² + δy²).
+/// are the mean distances to the two neighbours along the profile and across profiles (the nearer one alone
+/// where the other is over twice as far: a depth step); ρ = 1/(δx² + δy²).
 /// Zero when the sample has no valid neighbour in one of the two directions (isolated samples are not a
 /// surface measurement).
 double sample_density_per_mm2(const RangeImage& image, int i, int j);

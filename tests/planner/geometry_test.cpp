@@ -99,11 +99,24 @@ TEST(Geometry, DeepCavityIsCoveredByThePlanner) {
   EXPECT_GE(p.views.size(), 2u);
   // Without them (the thesis' optimal scanning zone) the middle of the floor is out of reach of the receiver.
   greedy.viewpoints.bisector_tilt = false;
+  greedy.viewpoints.open_direction_views = false;
   const ViewPlan q = plan_views(testing::square_cavity(60.0, 60.0, 90.0, 3.0), testing::thesis_sensor(),
                                 testing::thesis_spec(), greedy, {});
-  bool centre_unmeasurable = false;
-  for (auto r : q.cover.unmeasurable_rows) centre_unmeasurable |= (q.rough.points[r] - Eigen::Vector3d(0, 0, -60)).norm() < 1e-9;
-  EXPECT_TRUE(centre_unmeasurable);
+  auto centre_unmeasurable = [](const ViewPlan& v) {
+    bool out = false;
+    for (auto r : v.cover.unmeasurable_rows) out |= (v.rough.points[r] - Eigen::Vector3d(0, 0, -60)).norm() < 1e-9;
+    return out;
+  };
+  EXPECT_TRUE(centre_unmeasurable(q));
+  // Open-direction views alone rescue it: straight down the cavity from farther out, where the triangulation
+  // angle atan(b/R) is narrower, and the rows they were made for are reported.
+  greedy.viewpoints.open_direction_views = true;
+  const ViewPlan o = plan_views(testing::square_cavity(60.0, 60.0, 90.0, 3.0), testing::thesis_sensor(),
+                                testing::thesis_spec(), greedy, {});
+  EXPECT_FALSE(centre_unmeasurable(o));
+  EXPECT_GT(o.generation.rows_unmeasurable_before, 0u);
+  EXPECT_GT(o.generation.open_direction_rows, 0u);
+  EXPECT_LT(o.cover.unmeasurable_rows.size(), o.generation.rows_unmeasurable_before);
 }
 
 TEST(Geometry, RegistrationConstraintReportsWhatItCannotReach) {
@@ -111,6 +124,7 @@ TEST(Geometry, RegistrationConstraintReportsWhatItCannotReach) {
   // its registration graph connected rather than add views that cannot register.
   PlannerSettings st;
   st.cover.registration_threshold = 0.3;
+  st.viewpoints.open_direction_views = false;  // the far views would bridge floor and rim
   const ViewPlan p = plan_views(testing::square_cavity(60.0, 60.0, 90.0, 3.0), testing::thesis_sensor(),
                                 testing::thesis_spec(), st, {});
   EXPECT_EQ(p.cover.registration_components, 1u);
