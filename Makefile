@@ -28,12 +28,15 @@ test-asan: deps
 	LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp UBSAN_OPTIONS=print_stacktrace=1 \
 	  ctest --test-dir $(ASAN_BUILD) --output-on-failure -j$(JOBS) -L planner
 
-# Until the daemon exists: plan the bundled example object and print the plan summary.
+# Until the daemon exists: plan the bundled example object, then execute the plan with the virtual scanner
+# on the fine model (verified measurability, coverage mesh and projection image).
 demo: build
 	$(SCANCELL) plan --mesh tests/data/mushroom.off --fit-mm 200 \
 	  --sensor config/sensors/line-scan-thesis.yaml --spec config/spec/thesis.yaml \
 	  --settings config/planner/default.yaml --out $(BUILD)/demo-plan.json
-	@echo "plan written to $(BUILD)/demo-plan.json"
+	$(SCANCELL) verify --plan $(BUILD)/demo-plan.json --report $(BUILD)/demo-verification.json \
+	  --coverage-ply $(BUILD)/demo-coverage.ply --png $(BUILD)/demo-coverage.png
+	@echo "plan: $(BUILD)/demo-plan.json  verification: $(BUILD)/demo-verification.json  coverage: $(BUILD)/demo-coverage.{ply,png}"
 
 bench: build
 	$(BUILD)/bench/bench_planner

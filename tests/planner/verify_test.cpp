@@ -110,6 +110,25 @@ TEST(Verify, EstimatedAgreesWithVerifiedOnTheThesisConvexPatch) {
   for (std::size_t k = 1; k < v.views.size(); ++k) EXPECT_GE(v.views[k].cumulative, v.views[k - 1].cumulative);
 }
 
+TEST(Verify, AnalyticMvEqualsTheEstimateWhenTheRoughModelIsTheFineModel) {
+  // No decimation, no noise: the planner's estimate and the verifier's analytic test are the same test on the
+  // same points at the same poses, so they agree view by view (a cross-check of the plan's poses and columns).
+  const sp::SensorModel s = sp::testing::thesis_sensor();
+  const sp::ModelSpec spec = sp::testing::thesis_spec();
+  const sp::TriangleMesh cavity = sp::cavity_patch(60, 48, 0.5, 2.0);
+  sp::PlannerSettings settings;
+  settings.viewpoints.open_direction_views = false;  // their columns use a detuned spec
+  const sp::ViewPlan plan = sp::plan_views(cavity, s, spec, settings, {});
+  std::vector<sp::ScanPose> poses;
+  for (const auto& v : plan.views) poses.push_back(sp::scan_pose(v));
+  const auto v = sp::verify_views(cavity, s, spec, poses, plan.cover.cumulative_fraction);
+  ASSERT_EQ(v.views.size(), plan.views.size());
+  for (std::size_t k = 0; k < v.views.size(); ++k)
+    EXPECT_NEAR(v.views[k].cumulative_analytic, plan.cover.cumulative_fraction[k], 1e-9) << "view " << k;
+  // The virtual scanner agrees with both within 2 %.
+  EXPECT_NEAR(v.mv, v.mv_analytic, 0.02);
+}
+
 TEST(Verify, PoseErrorErodesCoverageAndIsSeeded) {
   const sp::SensorModel s = sp::testing::thesis_sensor();
   const sp::ModelSpec spec = sp::testing::thesis_spec();
