@@ -195,3 +195,24 @@ TEST(VirtualScanner, RangeImageFileRoundTripsAndRefusesDamage) {
   EXPECT_THROW(sp::load_range_image(dir / "missing.ply"), sp::DataError);
   std::filesystem::remove_all(dir);
 }
+
+TEST(VirtualScanner, RandomAccessCameraScansBothAxesOptically) {
+  sp::SensorModel s = sp::testing::thesis_sensor();
+  s.kind = sp::SensorKind::random_access;
+  s.fov_y_rad = 0.3;
+  const sp::OcclusionScene scene(square(300, Eigen::Vector3d::UnitZ()));
+  sp::ScanOptions opt;
+  opt.noise = false;
+  sp::ScanStats st;
+  const double z = 200.0;
+  const sp::RangeImage img = sp::virtual_scan(scene, s, looking_down(z, 0.0), opt, &st);
+  EXPECT_EQ(st.samples, 65536u);
+  // Both axes fan from the origin: spacing z·Φ/(N − 1) at the centre in x and in y, and the edge of the
+  // image at z·tan(Φy/2) in y.
+  EXPECT_NEAR((img.at(128, 128).object_mm - img.at(127, 128).object_mm).norm(), z * s.fov_x_rad / 255, 1e-3);
+  EXPECT_NEAR((img.at(128, 128).object_mm - img.at(128, 127).object_mm).norm(), z * s.fov_y_rad / 255, 1e-3);
+  EXPECT_NEAR(std::abs(img.at(128, 0).camera_mm.y()), z * std::tan(0.15), 1e-3);
+  // The receiver sits at (0, b, 0) for every ray: incidence in y-z is measured against each ray, so σz grows
+  // towards the image edge in y on a plane facing the camera.
+  EXPECT_GT(img.at(128, 0).sigma_z_mm, img.at(128, 128).sigma_z_mm);
+}
