@@ -27,6 +27,7 @@
 
 #include "planner/baselines.hpp"
 #include "planner/config.hpp"
+#include "planner/exact_cover.hpp"
 #include "planner/plan.hpp"
 #include "planner/synthetic.hpp"
 #include "planner/verify.hpp"
@@ -51,6 +52,8 @@ struct Row {
   std::size_t views = 0;
   double estimated = std::nan(""), mv = 0.0, mv_analytic = 0.0, unmeasurable = std::nan("");
   double plan_s = 0.0, verify_s = 0.0;
+  double bound = std::nan("");      // exact mode: proven lower bound on the view count
+  std::string solver_status;
   std::vector<double> progression;  // verified cumulative m_v per view
 };
 
@@ -188,21 +191,25 @@ int main(int argc, char** argv) {
         for (const auto& w : v.views) r.progression.push_back(w.cumulative);
       };
 
-      // 3M, plain and constrained greedy.
-      for (const auto mode : {sp::CoverMode::greedy, sp::CoverMode::constrained}) {
+      // 3M, plain and constrained greedy, and the exact program with the same registration constraint.
+      for (const auto mode : {sp::CoverMode::greedy, sp::CoverMode::constrained, sp::CoverMode::exact}) {
         sp::PlannerSettings settings = settings_file.empty() ? sp::PlannerSettings{} : sp::load_planner_settings(settings_file);
         settings.seed = seed;
         settings.cover.mode = mode;
         settings.cover.registration_threshold = 0.2;
         Row r;
         r.family = "3M";
-        r.method = mode == sp::CoverMode::greedy ? "3M greedy" : "3M constrained t_r=0.2";
+        r.method = mode == sp::CoverMode::greedy ? "3M greedy" : mode == sp::CoverMode::constrained ? "3M constrained t_r=0.2" : "3M exact t_r=0.2";
         const auto t = Clock::now();
         const sp::ViewPlan plan = sp::plan_views(fine, sensor, spec, settings, rough);
         r.plan_s = since(t);
         r.rough_vertices = plan.rough.size();
         r.estimated = plan.cover.cumulative_fraction.empty() ? 0.0 : plan.cover.cumulative_fraction.back();
         r.unmeasurable = 1.0 - plan.cover.measurable_fraction;
+        if (plan.exact_used) {
+          r.bound = plan.exact.bound;
+          r.solver_status = plan.exact.status;
+        }
         verify(r, plan.views, plan.cover.cumulative_fraction);
         emit(std::move(r));
       }
@@ -251,7 +258,8 @@ int main(int argc, char** argv) {
   {
     std::ofstream csv(csv_path);
     csv << "object,fine_vertices,r_f,method,views,rough_vertices,estimated_m,verified_m_v,analytic_m_v,"
-           "unmeasurable_share,views_to_mv_0.95,views_to_mv_0.99,views_to_mv_0.999,plan_s,verify_s\n";
+           "unmeasurable_share,views_to_mv_0.95,views_to_mv_0.99,views_to_mv_0.999,plan_s,verify_s,exact_bound_views,"
+           "exact_status\n";
     for (const auto& r : rows)
       csv << r.object << ',' << r.fine_vertices << ',' << fmt(r.r_f, "%.3f") << ',' << r.method << ',' << r.views << ','
           << r.rough_vertices << ',' << fmt(r.estimated) << ',' << fmt(r.mv) << ',' << fmt(r.mv_analytic) << ','
@@ -281,6 +289,22 @@ int main(int argc, char** argv) {
     std::printf("%-20s %5.2f %-16s %5zu %7.4f | %5zu %7.4f %9s %11.4f | %-10s %5zu %7.4f\n", name.c_str(), g->r_f,
                 tt->method.c_str(), tt->views, tt->mv, g->views, g->mv, reach ? std::to_string(reach).c_str() : "never",
                 mv_at(g->progression, tt->views), sph->method.substr(12, 2).c_str(), sph->views, sph->mv);
+  }
+  std::printf("\nset cover efficiency e_v = n_best / n (thesis 1.3), registration t_r = 0.2, exact mode %.0f s limit\n",
+              sp::CoverSettings{}.exact_time_limit_s);
+  std::printf("%-20s %10s %7s %7s %9s %9s %9s  %s\n", "object", "constrained", "exact", "bound", "ev_bound", "ev_exact",
+              "m_v_exact", "solver");
+  for (const auto& name : order) {
+    const Row *c = nullptr, *x = nullptr;
+    for (const Row* r : by_object[name]) {
+      if (r->method == "3M constrained t_r=0.2") c = r;
+      if (r->method == "3M exact t_r=0.2") x = r;
+    }
+    if (!c || !x || c->views == 0) continue;
+    const double lb = std::ceil(x->bound - 1e-6);
+    std::printf("%-20s %10zu %7zu %7.0f %9.3f %9.3f %9.4f  %s\n", name.c_str(), c->views, x->views, lb,
+                lb / static_cast<double>(c->views), static_cast<double>(x->views) / static_cast<double>(c->views), x->mv,
+                x->solver_status.c_str());
   }
   std::printf("\n3M_to_TT: 3M greedy views to reach the best turntable program's m_v; 3M_m@TTviews: 3M's m_v after as many "
               "views as that program has (all of them if fewer). CSV: %s\n", csv_path.c_str());

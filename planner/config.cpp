@@ -112,7 +112,9 @@ Section parse_root(const std::string& text, const std::string& where, YAML::Node
 
 const char* to_string(SensorKind k) { return k == SensorKind::line_scan ? "line_scan" : "random_access"; }
 const char* to_string(ViewpointScheme s) { return s == ViewpointScheme::variable ? "variable" : "decoupled"; }
-const char* to_string(CoverMode m) { return m == CoverMode::greedy ? "greedy" : "constrained"; }
+const char* to_string(CoverMode m) {
+  return m == CoverMode::greedy ? "greedy" : m == CoverMode::constrained ? "constrained" : "exact";
+}
 const char* to_string(RegistrationNormalizer n) { return n == RegistrationNormalizer::max_view ? "max_view" : "smaller_view"; }
 
 void validate(const SensorModel& s, const std::string& w) {
@@ -260,13 +262,18 @@ PlannerSettings load_planner_settings(const std::filesystem::path& file) {
     const std::string mode = c.get_or<std::string>("mode", to_string(p.cover.mode));
     if (mode == "greedy") p.cover.mode = CoverMode::greedy;
     else if (mode == "constrained") p.cover.mode = CoverMode::constrained;
-    else c.fail(c.key_path("mode"), "must be greedy or constrained, got '" + mode + "'");
+    else if (mode == "exact") p.cover.mode = CoverMode::exact;
+    else c.fail(c.key_path("mode"), "must be greedy, constrained or exact, got '" + mode + "'");
     p.cover.registration_threshold = c.non_negative("registration_threshold", p.cover.registration_threshold);
     if (!(p.cover.registration_threshold <= 1.0)) c.fail(c.key_path("registration_threshold"), "must be in [0, 1]");
     const std::string norm = c.get_or<std::string>("registration_normalizer", to_string(p.cover.normalizer));
     if (norm == "max_view") p.cover.normalizer = RegistrationNormalizer::max_view;
     else if (norm == "smaller_view") p.cover.normalizer = RegistrationNormalizer::smaller_view;
     else c.fail(c.key_path("registration_normalizer"), "must be max_view or smaller_view, got '" + norm + "'");
+    p.cover.eliminate_redundant = c.get_or<bool>("eliminate_redundant", p.cover.eliminate_redundant);
+    p.cover.exact_time_limit_s = c.get_or<double>("exact_time_limit_s", p.cover.exact_time_limit_s);
+    if (!(p.cover.exact_time_limit_s > 0.0 && p.cover.exact_time_limit_s <= 86400.0))
+      c.fail(c.key_path("exact_time_limit_s"), "must be in (0, 86400]");
     c.finish();
   }
   if (y.has("matrix")) {

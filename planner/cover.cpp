@@ -76,7 +76,7 @@ CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>
   std::vector<char> chosen(m.n_cols(), 0);
   double covered_w = 0.0;
   std::size_t covered_n = 0;
-  const bool constrained = st.mode == CoverMode::constrained;
+  const bool constrained = registration_applies(st);
   // Registrability (eq. 4.2) is checked lazily, only for candidates that reach the top of the heap: a
   // candidate's overlap with each chosen view is counted once (checked_upto), and once it registers it stays
   // registrable. A row -> columns index would do it eagerly but doubles peak memory on whole objects.
@@ -204,6 +204,18 @@ CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>
     }
   }
 
+  if (st.eliminate_redundant) {
+    const auto kept = eliminate_redundant(m, w, st, res.views);
+    const std::size_t removed = res.views.size() - kept.size();
+    if (removed) {
+      CoverResult d = describe_cover(m, w, st, kept);
+      d.blocked_by_registration = res.blocked_by_registration;
+      d.bridge_views = res.bridge_views;
+      d.stop_reason = res.stop_reason;
+      d.redundant_removed = removed;
+      return d;
+    }
+  }
   // Registration graph G_r over the chosen views (thesis 4.2.5).
   const std::size_t n = res.views.size();
   UnionFind uf(n);
@@ -216,6 +228,172 @@ CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>
       }
     }
   for (std::uint32_t a = 0; a < n; ++a) res.registration_components += uf.find(a) == a;
+  return res;
+}
+
+double registration_sigma(const MeasurabilityMatrix& m, const std::vector<double>& w, const CoverSettings& st,
+                          std::uint32_t a, std::uint32_t b, double max_column_weight) {
+  double norm = max_column_weight;
+  if (st.normalizer == RegistrationNormalizer::smaller_view) {
+    double wa = 0.0, wb = 0.0;
+    m.columns[a].for_each([&](std::uint32_t r) { wa += w[r]; });
+    m.columns[b].for_each([&](std::uint32_t r) { wb += w[r]; });
+    norm = std::min(wa, wb);
+  }
+  return norm > 0.0 ? shared_weight(m.columns[a], m.columns[b], w) / norm : 0.0;
+}
+
+namespace {
+
+double column_weight(const MeasurabilityColumn& c, const std::vector<double>& w) {
+  double s = 0.0;
+  c.for_each([&](std::uint32_t r) { s += w[r]; });
+  return s;
+}
+
+double max_column_weight(const MeasurabilityMatrix& m, const std::vector<double>& w) {
+  double best = 0.0;
+  for (const auto& c : m.columns) best = std::max(best, column_weight(c, w));
+  return best;
+}
+
+/// σ ≥ t_r between every pair of `views` (computed once: the passes below ask O(k³) questions of it).
+std::vector<std::vector<char>> registration_adjacency(const MeasurabilityMatrix& m, const std::vector<double>& w,
+                                                      const CoverSettings& st, const std::vector<std::uint32_t>& views) {
+  const std::size_t k = views.size();
+  std::vector<double> vw(k);
+  for (std::size_t i = 0; i < k; ++i) vw[i] = column_weight(m.columns[views[i]], w);
+  const double ms = st.normalizer == RegistrationNormalizer::max_view ? max_column_weight(m, w) : 0.0;
+  std::vector<std::vector<char>> adj(k, std::vector<char>(k, 0));
+  for (std::size_t a = 0; a < k; ++a)
+    for (std::size_t b = a + 1; b < k; ++b) {
+      const double norm = st.normalizer == RegistrationNormalizer::max_view ? ms : std::min(vw[a], vw[b]);
+      if (norm <= 0.0) continue;
+      const double shared = shared_weight(m.columns[views[a]], m.columns[views[b]], w);
+      if (shared > 0.0 && shared / norm >= st.registration_threshold) adj[a][b] = adj[b][a] = 1;
+    }
+  return adj;
+}
+
+/// Whether the views marked in `alive` form one connected registration graph (BFS on the adjacency).
+bool connected(const std::vector<std::vector<char>>& adj, const std::vector<char>& alive) {
+  std::size_t start = adj.size(), n_alive = 0;
+  for (std::size_t i = 0; i < adj.size(); ++i)
+    if (alive[i]) n_alive++, start = std::min(start, i);
+  if (n_alive <= 1) return true;
+  std::vector<char> seen(adj.size(), 0);
+  std::vector<std::size_t> stack = {start};
+  seen[start] = 1;
+  std::size_t reached = 1;
+  while (!stack.empty()) {
+    const std::size_t a = stack.back();
+    stack.pop_back();
+    for (std::size_t b = 0; b < adj.size(); ++b)
+      if (alive[b] && !seen[b] && adj[a][b]) seen[b] = 1, ++reached, stack.push_back(b);
+  }
+  return reached == n_alive;
+}
+
+}  // namespace
+
+std::vector<std::uint32_t> eliminate_redundant(const MeasurabilityMatrix& m, const std::vector<double>& w,
+                                               const CoverSettings& st, const std::vector<std::uint32_t>& views) {
+  std::vector<std::uint32_t> count(m.n_rows, 0);
+  for (auto j : views) m.columns[j].for_each([&](std::uint32_t r) { ++count[r]; });
+  std::vector<char> keep(views.size(), 1);
+  const bool registration = registration_applies(st);
+  const auto adj = registration ? registration_adjacency(m, w, st, views) : std::vector<std::vector<char>>{};
+  for (std::size_t k = views.size(); k-- > 0;) {
+    bool redundant = true;
+    m.columns[views[k]].for_each([&](std::uint32_t r) { redundant &= count[r] >= 2; });
+    if (!redundant) continue;
+    if (registration) {
+      keep[k] = 0;
+      const bool ok = connected(adj, keep);
+      keep[k] = 1;
+      if (!ok) continue;
+    }
+    keep[k] = 0;
+    m.columns[views[k]].for_each([&](std::uint32_t r) { --count[r]; });
+  }
+  std::vector<std::uint32_t> out;
+  for (std::size_t i = 0; i < views.size(); ++i)
+    if (keep[i]) out.push_back(views[i]);
+  return out;
+}
+
+std::vector<std::uint32_t> order_by_gain(const MeasurabilityMatrix& m, const std::vector<double>& w,
+                                         const CoverSettings& st, std::vector<std::uint32_t> views) {
+  std::sort(views.begin(), views.end());
+  std::vector<char> covered(m.n_rows, 0), used(views.size(), 0), reaches(views.size(), 0);
+  const bool registration = registration_applies(st);
+  const auto adj = registration ? registration_adjacency(m, w, st, views) : std::vector<std::vector<char>>{};
+  std::vector<std::uint32_t> out;
+  while (out.size() < views.size()) {
+    std::int64_t best = -1, best_reg = -1;
+    double best_gain = -1.0, best_reg_gain = -1.0;
+    for (std::size_t i = 0; i < views.size(); ++i) {
+      if (used[i]) continue;
+      double g = 0.0;
+      m.columns[views[i]].for_each([&](std::uint32_t r) { if (!covered[r]) g += w[r]; });
+      if (g > best_gain) best_gain = g, best = static_cast<std::int64_t>(i);
+      if (reaches[i] && g > best_reg_gain) best_reg_gain = g, best_reg = static_cast<std::int64_t>(i);
+    }
+    const std::size_t pick = static_cast<std::size_t>(registration && best_reg >= 0 ? best_reg : best);
+    used[pick] = 1;
+    out.push_back(views[pick]);
+    m.columns[views[pick]].for_each([&](std::uint32_t r) { covered[r] = 1; });
+    if (registration)
+      for (std::size_t i = 0; i < views.size(); ++i) reaches[i] |= adj[pick][i];
+  }
+  return out;
+}
+
+CoverResult describe_cover(const MeasurabilityMatrix& m, const std::vector<double>& w, const CoverSettings& st,
+                           const std::vector<std::uint32_t>& views) {
+  CoverResult res;
+  const double total = std::accumulate(w.begin(), w.end(), 0.0);
+  res.unmeasurable_rows = m.unmeasurable_rows();
+  double unmeasurable_w = 0.0;
+  for (auto r : res.unmeasurable_rows) unmeasurable_w += w[r];
+  res.measurable_fraction = total > 0 ? (total - unmeasurable_w) / total : 0.0;
+  for (std::uint32_t j = 0; j < m.n_cols(); ++j) {
+    double cw = 0.0;
+    m.columns[j].for_each([&](std::uint32_t r) { cw += w[r]; });
+    res.max_column_count = std::max(res.max_column_count, m.columns[j].count());
+    res.max_column_weight = std::max(res.max_column_weight, cw);
+  }
+  std::vector<char> covered(m.n_rows, 0);
+  double covered_w = 0.0;
+  std::size_t covered_n = 0;
+  for (auto j : views) {
+    double g = 0.0;
+    m.columns[j].for_each([&](std::uint32_t r) {
+      if (!covered[r]) {
+        covered[r] = 1;
+        g += w[r];
+        ++covered_n;
+      }
+    });
+    covered_w += g;
+    res.views.push_back(j);
+    res.gain_weight.push_back(g);
+    res.cumulative_fraction.push_back(total > 0 ? covered_w / total : 0.0);
+    res.cumulative_point_fraction.push_back(m.n_rows ? static_cast<double>(covered_n) / m.n_rows : 0.0);
+  }
+  std::vector<double> vw(views.size());
+  for (std::size_t i = 0; i < views.size(); ++i) vw[i] = column_weight(m.columns[views[i]], w);
+  UnionFind uf(views.size());
+  for (std::uint32_t a = 0; a < views.size(); ++a)
+    for (std::uint32_t b = a + 1; b < views.size(); ++b) {
+      const double norm = st.normalizer == RegistrationNormalizer::max_view ? res.max_column_weight : std::min(vw[a], vw[b]);
+      const double s = norm > 0.0 ? shared_weight(m.columns[views[a]], m.columns[views[b]], w) / norm : 0.0;
+      if (s >= st.registration_threshold && s > 0.0) {
+        res.registration_edges.push_back({a, b, s});
+        uf.unite(a, b);
+      }
+    }
+  for (std::uint32_t a = 0; a < views.size(); ++a) res.registration_components += uf.find(a) == a;
   return res;
 }
 

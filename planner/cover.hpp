@@ -9,7 +9,9 @@
 
 namespace scancell::planner {
 
-enum class CoverMode { greedy, constrained };
+/// greedy: plain greedy search (4.4.2); constrained: greedy with the registration constraint (4.4.3); exact:
+/// the integer program eq. 4.7-4.10 on CBC (exact_cover.hpp), registration enforced when t_r > 0.
+enum class CoverMode { greedy, constrained, exact };
 
 /// What σ_kj (eq. 4.1) divides the shared weight by. The thesis uses m_S, the largest single view of all
 /// candidates; on whole objects with views of very different size that makes small views (cavities, curved
@@ -22,7 +24,16 @@ struct CoverSettings {
   double registration_threshold = 0.1;  // t_r: σ_kj ≥ t_r for two views to register (eq. 4.2)
   RegistrationNormalizer normalizer = RegistrationNormalizer::smaller_view;
   double coverage_goal = 1.0;           // stop once this fraction of the total row weight is covered
+  /// After greedy: drop every view whose rows all other views cover too (latest first), keeping the
+  /// registration graph connected when the registration constraint applies.
+  bool eliminate_redundant = true;
+  double exact_time_limit_s = 10.0;     // exact mode: wall-clock limit of the solver (anytime: best so far)
 };
+
+/// Whether the registration constraint applies: constrained greedy, or exact with t_r > 0.
+inline bool registration_applies(const CoverSettings& s) {
+  return s.mode == CoverMode::constrained || (s.mode == CoverMode::exact && s.registration_threshold > 0.0);
+}
 
 struct RegistrationEdge {
   std::uint32_t a, b;  // positions in the plan (selection order)
@@ -42,6 +53,7 @@ struct CoverResult {
   double max_column_weight = 0.0;                // m_S, the normaliser of eq. 4.1, in row weight
   std::size_t blocked_by_registration = 0;       // times the best candidate had to wait for an overlap
   std::size_t bridge_views = 0;                  // views added only to let waiting candidates register
+  std::size_t redundant_removed = 0;             // views dropped by the redundancy-elimination pass
   std::string stop_reason;
 };
 
@@ -60,5 +72,24 @@ double shared_weight(const MeasurabilityColumn& a, const MeasurabilityColumn& b,
 /// curved ones) from making the largest-area view unregistrable by row count.
 CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>& row_weight,
                          const CoverSettings& settings);
+
+/// σ_ab of eq. 4.1 under the settings' normaliser (shared row weight over the smaller view or over m_S).
+double registration_sigma(const MeasurabilityMatrix& m, const std::vector<double>& row_weight,
+                          const CoverSettings& settings, std::uint32_t a, std::uint32_t b, double max_column_weight);
+
+/// Views (in the given order) whose rows the others all cover, removed latest first; in constrained use the
+/// registration graph of what remains must stay connected. Returns the kept views in their order.
+std::vector<std::uint32_t> eliminate_redundant(const MeasurabilityMatrix& m, const std::vector<double>& row_weight,
+                                               const CoverSettings& settings, const std::vector<std::uint32_t>& views);
+
+/// Orders a set of views as greedy would take them (largest new weight first; with the registration
+/// constraint, among those that register with a view already ordered when any does).
+std::vector<std::uint32_t> order_by_gain(const MeasurabilityMatrix& m, const std::vector<double>& row_weight,
+                                         const CoverSettings& settings, std::vector<std::uint32_t> views);
+
+/// Fills a CoverResult for `views` taken in the given order: gains, cumulative fractions, unmeasurable rows,
+/// m_S, registration edges and components. stop_reason and the greedy counters are left to the caller.
+CoverResult describe_cover(const MeasurabilityMatrix& m, const std::vector<double>& row_weight,
+                           const CoverSettings& settings, const std::vector<std::uint32_t>& views);
 
 }  // namespace scancell::planner

@@ -93,7 +93,12 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     p.times.matrix_s = since(t);
 
     t = Clock::now();
-    p.cover = greedy_cover(matrix, p.rough.area_mm2, p.settings.cover);
+    if (p.settings.cover.mode == CoverMode::exact) {
+      p.cover = exact_cover(matrix, p.rough.area_mm2, p.settings.cover, {}, &p.exact);
+      p.exact_used = true;
+    } else {
+      p.cover = greedy_cover(matrix, p.rough.area_mm2, p.settings.cover);
+    }
     for (auto j : p.cover.views) p.views.push_back(candidates[j]);
     p.times.cover_s = since(t);
   });
@@ -145,7 +150,9 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
                    {"cover",
                     {{"mode", to_string(p.settings.cover.mode)},
                      {"registration_threshold", p.settings.cover.registration_threshold},
-                     {"registration_normalizer", to_string(p.settings.cover.normalizer)}}},
+                     {"registration_normalizer", to_string(p.settings.cover.normalizer)},
+                     {"eliminate_redundant", p.settings.cover.eliminate_redundant},
+                     {"exact_time_limit_s", p.settings.cover.exact_time_limit_s}}},
                    {"matrix", {{"ray_offset_mm", p.settings.matrix.ray_offset_mm}}}};
   Eigen::Matrix4d obj = Eigen::Matrix4d::Identity();
   obj.topLeftCorner<3, 3>() *= p.object.scale;
@@ -217,6 +224,7 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
       {"unmeasurable_rows", p.cover.unmeasurable_rows.size()},
       {"stop_reason", p.cover.stop_reason},
       {"bridge_views", p.cover.bridge_views},
+      {"redundant_views_removed", p.cover.redundant_removed},
       {"registration",
        {{"threshold", p.settings.cover.registration_threshold},
         {"m_s_rows", p.cover.max_column_count},
@@ -232,6 +240,33 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
         {"cover", p.times.cover_s},
         {"total", p.times.total_s()}}},
       {"threads", p.threads}};
+  if (p.exact_used) {
+    const ExactReport& e = p.exact;
+    j["summary"]["solver"] = {{"name", e.solver},
+                              {"status", e.status},
+                              {"objective", e.objective},
+                              {"bound", e.bound},
+                              {"gap", e.gap},
+                              {"proven_optimal", e.proven_optimal},
+                              // Stopped by the clock: another machine (or load) may return another cover.
+                              {"depends_on_machine_speed", !e.proven_optimal && e.status.find("time limit") != std::string::npos},
+                              {"lagrangian_bound", e.lagrangian_bound},
+                              {"core_columns", e.core_columns},
+                              {"greedy_objective", e.greedy_objective},
+                              {"time_s", e.seconds},
+                              {"solves", e.solves},
+                              {"connectivity_cuts", e.connectivity_cuts},
+                              {"presolve",
+                               {{"rows", e.rows},
+                                {"rows_after", e.rows_after_presolve},
+                                {"columns", e.columns},
+                                {"columns_after", e.columns_after_presolve},
+                                {"forced_columns", e.forced_columns},
+                                {"merged_rows", e.merged_rows},
+                                {"dominated_rows", e.dominated_rows},
+                                {"dominated_columns", e.dominated_columns},
+                                {"dominance_budget_hit", e.dominance_budget_hit}}}};
+  }
   return j;
 }
 

@@ -9,6 +9,7 @@
 
 #include "planner/config.hpp"
 #include "planner/cover.hpp"
+#include "planner/exact_cover.hpp"
 #include "planner/measurability.hpp"
 #include "planner/mesh.hpp"
 #include "planner/rough_model.hpp"
@@ -45,6 +46,8 @@ struct ViewPlan {
   std::size_t matrix_bytes = 0;
   std::vector<Viewpoint> views;  // in selection order
   CoverResult cover;
+  ExactReport exact;        // filled when settings.cover.mode == exact
+  bool exact_used = false;
   StageTimes times;
   int threads = 0;
 };

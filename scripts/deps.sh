@@ -7,6 +7,7 @@ PKGS=(
   libeigen3-dev libembree-dev libassimp-dev libopenmesh-dev libtbb-dev
   libyaml-cpp-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev libpng-dev
+  coinor-libcbc-dev
 )
 missing=()
 for p in "${PKGS[@]}"; do

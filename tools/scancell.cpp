@@ -37,7 +37,8 @@ const char* kPlanUsage =
     "  --seed N                  seed for the noise (default: settings seed)\n"
     "  --segments FILE           surface patch label per mesh vertex (integers, -1 none), in vertex order\n"
     "                            after welding; adds single-best-view candidates per patch (thesis 6.3.4)\n"
-    "  --cover greedy|constrained   override the settings' cover mode\n"
+    "  --cover greedy|constrained|exact   override the settings' cover mode (exact: CBC integer program,\n"
+    "                            registration enforced when t_r > 0, greedy warm start, cover.exact_time_limit_s)\n"
     "  --threads N               worker threads (default all cores; the plan does not depend on it)\n"
     "  --quiet                   no summary table\n";
 
@@ -126,7 +127,8 @@ int cmd_plan(int argc, char** argv) {
     const std::string& m = o.at("--cover");
     if (m == "greedy") settings.cover.mode = sp::CoverMode::greedy;
     else if (m == "constrained") settings.cover.mode = sp::CoverMode::constrained;
-    else throw UsageError("--cover: '" + m + "' is not greedy or constrained");
+    else if (m == "exact") settings.cover.mode = sp::CoverMode::exact;
+    else throw UsageError("--cover: '" + m + "' is not greedy, constrained or exact");
   }
   sp::RoughModelOptions rough;
   if (o.count("--rough-vertices")) rough.target_vertices = whole(o, "--rough-vertices");

@@ -206,5 +206,31 @@ TEST_F(Cli, VerifyRefusesADamagedPlanWithItsPath) {
   EXPECT_EQ(run("verify").status, 2);
 }
 
+TEST_F(Cli, ExactCoverRecordsTheSolverAndIsNeverWorseThanGreedy) {
+  const fs::path settings = dir_ / "exact.yaml";
+  std::ofstream(settings) << "cover:\n  mode: constrained\n  exact_time_limit_s: 3\n";
+  const std::string mesh = testing::source_path("tests/data/mushroom.off");
+  const fs::path g = dir_ / "greedy.json", x = dir_ / "exact.json";
+  ASSERT_EQ(run(base_args(mesh, g) + " --fit-mm 200 --rough-vertices 300 --quiet --settings " + settings.string()).status, 0);
+  const CommandResult r = run(base_args(mesh, x) + " --fit-mm 200 --rough-vertices 300 --cover exact --settings " + settings.string());
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("exact (CBC"));
+  std::ifstream gi(g), xi(x);
+  const auto gj = nlohmann::json::parse(gi), xj = nlohmann::json::parse(xi);
+  const auto& s = xj["summary"]["solver"];
+  EXPECT_THAT(s["name"].get<std::string>(), HasSubstr("CBC"));
+  EXPECT_LE(xj["views"].size(), gj["views"].size());
+  EXPECT_EQ(s["objective"].get<double>(), static_cast<double>(xj["views"].size()));
+  EXPECT_LE(s["bound"].get<double>(), s["objective"].get<double>());
+  EXPECT_LE(s["time_s"].get<double>(), 6.0);
+  EXPECT_TRUE(xj["summary"]["registration"]["connected"]);
+  EXPECT_EQ(xj["settings"]["cover"]["mode"], "exact");
+  // A typo in the mode is refused with the key path.
+  std::ofstream(settings) << "cover:\n  mode: exakt\n";
+  const CommandResult bad = run(base_args(mesh, dir_ / "b.json") + " --settings " + settings.string());
+  EXPECT_EQ(bad.status, 4);
+  EXPECT_THAT(bad.output, HasSubstr("cover.mode: must be greedy, constrained or exact"));
+}
+
 }  // namespace
 }  // namespace scancell::planner
