@@ -6,6 +6,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include "planner/cell.hpp"
 #include "planner/errors.hpp"
 
 namespace scancell::planner {
@@ -47,6 +48,32 @@ class Section {
     if (!(v > 0.0)) fail(key_path(key), "must be > 0, got " + std::to_string(v));
     return v;
   }
+  Eigen::Vector3d vec3(const std::string& key) {
+    used_.insert(key);
+    const YAML::Node n = node_[key];
+    if (!n) fail(key_path(key), "missing");
+    if (!n.IsSequence() || n.size() != 3) fail(key_path(key), "must be a list of 3 numbers");
+    Eigen::Vector3d v;
+    for (int k = 0; k < 3; ++k) {
+      try {
+        v[k] = n[k].as<double>();
+      } catch (const YAML::Exception&) {
+        fail(key_path(key), "element " + std::to_string(k) + " is not a number");
+      }
+      if (!std::isfinite(v[k])) fail(key_path(key), "element " + std::to_string(k) + " must be finite");
+    }
+    return v;
+  }
+  std::vector<std::string> keys() const {
+    std::vector<std::string> out;
+    for (const auto& kv : node_) out.push_back(kv.first.as<std::string>());
+    return out;
+  }
+  YAML::Node raw(const std::string& key) {
+    used_.insert(key);
+    return node_[key];
+  }
+  const std::string& file() const { return file_; }
   double non_negative(const std::string& key, double fallback) {
     const double v = get_or<double>(key, fallback);
     if (!(v >= 0.0)) fail(key_path(key), "must be >= 0, got " + std::to_string(v));
@@ -283,6 +310,141 @@ PlannerSettings load_planner_settings(const std::filesystem::path& file) {
   }
   y.finish();
   return p;
+}
+
+namespace {
+
+Eigen::Isometry3d pose_from(Section& s, const std::string& translation_key, const std::string& rpy_key) {
+  Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
+  if (s.has(translation_key)) t.translation() = s.vec3(translation_key);
+  if (s.has(rpy_key)) {
+    const Eigen::Vector3d r = s.vec3(rpy_key);
+    t.linear() = (Eigen::AngleAxisd(r.z(), Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(r.y(), Eigen::Vector3d::UnitY()) *
+                  Eigen::AngleAxisd(r.x(), Eigen::Vector3d::UnitX()))
+                     .toRotationMatrix();
+  }
+  return t;
+}
+
+Box box_from(Section& s) {
+  Box b{s.vec3("min_mm"), s.vec3("max_mm")};
+  if (!(b.min.array() < b.max.array()).all()) s.fail(s.key_path("max_mm"), "must exceed min_mm on every axis");
+  s.finish();
+  return b;
+}
+
+}  // namespace
+
+std::size_t CellModel::axis_index(const std::string& n) const {
+  for (std::size_t i = 0; i < axes.size(); ++i)
+    if (axes[i].name == n) return i;
+  throw ConfigError("cell " + name + ": no axis '" + n + "'");
+}
+
+JointVector CellModel::home() const {
+  JointVector q;
+  for (const auto& a : axes) q.push_back(a.home);
+  return q;
+}
+
+CellModel load_cell(const std::filesystem::path& file) {
+  YAML::Node root;
+  Section y = open_root(file, root);
+  CellModel c;
+  c.name = y.get_or<std::string>("name", file.stem().string());
+  const std::string kin = y.get<std::string>("kinematics");
+  std::vector<std::string> names;
+  if (kin == "turntable_lift_tilt") {
+    c.kinematics = CellKinematics::turntable_lift_tilt;
+    names = {"turntable", "reach", "lift", "tilt", "sweep"};
+  } else if (kin == "arm_turntable") {
+    c.kinematics = CellKinematics::arm_turntable;
+    names = {"turntable", "j1", "j2", "j3", "j4", "j5", "j6"};
+  } else {
+    y.fail("kinematics", "must be turntable_lift_tilt or arm_turntable, got '" + kin + "'");
+  }
+  {
+    Section axes = y.section("axes");
+    for (const auto& n : names) {
+      if (!axes.has(n)) axes.fail(axes.key_path(n), "missing (" + kin + " needs " + std::to_string(names.size()) + " axes)");
+      Section a = axes.section(n);
+      Axis ax;
+      ax.name = n;
+      const std::string type = a.get<std::string>("type");
+      if (type == "rotary") ax.type = AxisType::rotary;
+      else if (type == "linear") ax.type = AxisType::linear;
+      else a.fail(a.key_path("type"), "must be rotary or linear, got '" + type + "'");
+      const bool rot = ax.type == AxisType::rotary;
+      const std::string u = rot ? "_rad" : "_mm";
+      ax.min = a.get<double>("min" + u);
+      ax.max = a.get<double>("max" + u);
+      if (!(ax.min < ax.max)) a.fail(a.key_path("max" + u), "must be greater than min" + u);
+      ax.max_speed = a.positive(rot ? "max_speed_rad_s" : "max_speed_mm_s");
+      ax.max_accel = a.positive(rot ? "max_accel_rad_s2" : "max_accel_mm_s2");
+      ax.home = a.get_or<double>("home" + u, std::clamp(0.0, ax.min, ax.max));
+      if (!(ax.home >= ax.min && ax.home <= ax.max)) a.fail(a.key_path("home" + u), "must lie within the limits");
+      a.finish();
+      c.axes.push_back(ax);
+    }
+    for (const auto& k : axes.keys())
+      if (std::find(names.begin(), names.end(), k) == names.end())
+        axes.fail(axes.key_path(k), "unknown axis for " + kin);
+  }
+  c.object_on_table = pose_from(y, "object_offset_mm", "object_rpy_rad");
+  if (y.has("camera_offset_mm")) c.camera_offset_mm = y.vec3("camera_offset_mm");
+  {
+    Section b = y.section("scanner_body");
+    c.scanner_body = box_from(b);
+  }
+  if (y.has("fixtures")) {
+    const YAML::Node list = y.raw("fixtures");
+    if (!list.IsSequence()) y.fail("fixtures", "must be a list");
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      Section f(list[i], file.string(), "fixtures[" + std::to_string(i) + "]");
+      Fixture fx;
+      fx.name = f.get<std::string>("name");
+      const std::string frame = f.get<std::string>("frame");
+      if (frame == "table") fx.on_table = true;
+      else f.fail(f.key_path("frame"), "must be table (fixtures that turn with the object; world-fixed ones are not supported yet), got '" + frame + "'");
+      fx.box = Box{f.vec3("min_mm"), f.vec3("max_mm")};
+      if (!(fx.box.min.array() < fx.box.max.array()).all()) f.fail(f.key_path("max_mm"), "must exceed min_mm on every axis");
+      f.finish();
+      c.fixtures.push_back(fx);
+    }
+  }
+  c.clearance_mm = y.non_negative("clearance_mm", c.clearance_mm);
+  c.scan_speed_mm_s = y.get_or<double>("scan_speed_mm_s", c.scan_speed_mm_s);
+  if (!(c.scan_speed_mm_s > 0.0)) y.fail("scan_speed_mm_s", "must be > 0");
+  if (y.has("pose_error")) {
+    Section p = y.section("pose_error");
+    c.pose_error.sigma_p_mm = p.non_negative("sigma_p_mm", 0.0);
+    c.pose_error.sigma_a_rad = p.non_negative("sigma_a_rad", 0.0);
+    c.pose_error.sigma_t_rad = p.non_negative("sigma_t_rad", 0.0);
+    p.finish();
+  }
+  if (c.kinematics == CellKinematics::arm_turntable) {
+    Section arm = y.section("arm");
+    c.arm_base = pose_from(arm, "base_mm", "base_rpy_rad");
+    c.tool = pose_from(arm, "tool_mm", "tool_rpy_rad");
+    const YAML::Node dh = arm.raw("dh");
+    if (!dh || !dh.IsSequence() || dh.size() != 6) arm.fail(arm.key_path("dh"), "must list 6 joints [a_mm, alpha_rad, d_mm, theta_offset_rad]");
+    for (std::size_t i = 0; i < 6; ++i) {
+      if (!dh[i].IsSequence() || dh[i].size() != 4) arm.fail(arm.key_path("dh[" + std::to_string(i) + "]"), "must be 4 numbers");
+      std::array<double, 4> row{};
+      for (int k = 0; k < 4; ++k) {
+        try {
+          row[k] = dh[i][k].as<double>();
+        } catch (const YAML::Exception&) {
+          arm.fail(arm.key_path("dh[" + std::to_string(i) + "]"), "element " + std::to_string(k) + " is not a number");
+        }
+        if (!std::isfinite(row[k])) arm.fail(arm.key_path("dh[" + std::to_string(i) + "]"), "must be finite");
+      }
+      c.dh.push_back(row);
+    }
+    arm.finish();
+  }
+  y.finish();
+  return c;
 }
 
 }  // namespace scancell::planner

@@ -49,18 +49,24 @@ bool sphere_may_touch_frustum(const SensorModel& s, const FrustumTerms& f, doubl
   return std::abs(c.y()) - r <= half_y;
 }
 
-/// The two occlusion rays of a pair: from just off the surface to the laser source and to the receiver.
-void pair_rays(const Eigen::Vector3d& s, const Eigen::Vector3d& n, const Viewpoint& v, const Eigen::Vector3d& yc,
-               const PointTest& t, double eps, OcclusionRay* out) {
+/// The occlusion rays of a pair: from just off the surface to the laser source and to the receiver, and with a
+/// near-miss margin m also to both displaced by ±m along camera x and y (10 rays instead of 2).
+void pair_rays(const Eigen::Vector3d& s, const Eigen::Vector3d& n, const Viewpoint& v, const Eigen::Matrix3d& r,
+               const PointTest& t, double eps, double margin, OcclusionRay* out) {
   const Eigen::Vector3d origin = s + eps * n;
+  const Eigen::Vector3d yc = r.col(1), xc = r.col(0);
   const Eigen::Vector3d ends[2] = {v.position + t.laser_y_mm * yc, v.position + t.receiver_y_mm * yc};
-  for (int k = 0; k < 2; ++k) {
-    const Eigen::Vector3d d = ends[k] - origin;
-    out[k].origin = origin.cast<float>();
-    out[k].dir = d.cast<float>();
-    out[k].t_near = 0.0f;
-    out[k].t_far = static_cast<float>(1.0 - eps / std::max(d.norm(), eps * 2.0));
-  }
+  const Eigen::Vector3d shifts[5] = {Eigen::Vector3d::Zero(), margin * xc, -margin * xc, margin * yc, -margin * yc};
+  const int n_shift = margin > 0.0 ? 5 : 1;
+  int k = 0;
+  for (const auto& end : ends)
+    for (int q = 0; q < n_shift; ++q, ++k) {
+      const Eigen::Vector3d d = end + shifts[q] - origin;
+      out[k].origin = origin.cast<float>();
+      out[k].dir = d.cast<float>();
+      out[k].t_near = 0.0f;
+      out[k].t_far = static_cast<float>(1.0 - eps / std::max(d.norm(), eps * 2.0));
+    }
 }
 
 struct Counters {
@@ -78,6 +84,20 @@ struct Counters {
 };
 
 }  // namespace
+
+SensorModel detuned_sensor(const SensorModel& sensor, const Countermeasures& c) {
+  SensorModel s = sensor;
+  s.range_min_mm += c.dof_margin_mm;
+  s.range_max_mm = std::max(s.range_min_mm, s.range_max_mm - c.dof_margin_mm);
+  return s;
+}
+
+ModelSpec detuned_spec(const ModelSpec& spec, const Countermeasures& c) {
+  ModelSpec s = spec;
+  s.precision_mm /= 1.0 + c.compliance_buffer;
+  s.density_per_mm2 *= 1.0 + c.compliance_buffer;
+  return s;
+}
 
 MeasurabilityColumn::MeasurabilityColumn(std::vector<std::uint32_t> sorted_rows, std::uint32_t n_rows)
     : count_(static_cast<std::uint32_t>(sorted_rows.size())) {
@@ -129,55 +149,73 @@ std::vector<std::uint32_t> MeasurabilityMatrix::unmeasurable_rows() const {
   return out;
 }
 
-MeasurabilityMatrix build_measurability(const RoughModel& rough, const OcclusionScene& scene, const SensorModel& sensor,
-                                        const ModelSpec& spec, const std::vector<Viewpoint>& candidates,
+MeasurabilityMatrix build_measurability(const RoughModel& rough, const OcclusionScene& scene, const SensorModel& sensor_in,
+                                        const ModelSpec& spec_in, const std::vector<Viewpoint>& candidates,
                                         const MatrixSettings& settings, MatrixStats* stats) {
   MeasurabilityMatrix m;
   m.n_rows = static_cast<std::uint32_t>(rough.size());
   m.columns.resize(candidates.size());
   const auto blocks = make_blocks(rough);
   const double eps = ray_offset(rough, settings);
-  const FrustumTerms terms(sensor);
+  const Countermeasures& cm = settings.countermeasures;
+  // Detuned tests (thesis 7.4.7): the density formula keeps the real Φx (the sample spacing does not change),
+  // only the frustum test uses the narrowed width.
+  const SensorModel tested = detuned_sensor(sensor_in, cm);
+  const ModelSpec spec = detuned_spec(spec_in, cm);
+  const SensorModel& sensor = tested;
+  FrustumTerms terms(sensor_in);
+  terms.tan_half_x *= 1.0 - cm.frustum_detune;
+  terms.tan_half_y *= 1.0 - cm.frustum_detune;
+  const double length_factor = 1.0 - cm.frustum_detune;
+  const std::size_t per_pair = cm.visibility_margin_mm > 0.0 ? 10 : 2;
   Counters cnt;
 
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, candidates.size(), 4), [&](const auto& range) {
     std::vector<std::uint32_t> pending_rows;
     std::vector<OcclusionRay> rays;
-    std::vector<std::uint8_t> occ(2 * kPairsPerFlush);
+    std::vector<std::uint8_t> occ(per_pair * kPairsPerFlush);
     std::vector<std::uint32_t> column;
     pending_rows.reserve(kPairsPerFlush);
-    rays.reserve(2 * kPairsPerFlush);
+    rays.reserve(per_pair * kPairsPerFlush);
     for (std::size_t j = range.begin(); j != range.end(); ++j) {
       const Viewpoint& v = candidates[j];
       const Eigen::Matrix3d r = v.rotation();
       const Eigen::Matrix3d rt = r.transpose();
-      const Eigen::Vector3d yc = r.col(1);
+      const double scan_length = v.scan_length_mm * length_factor;
       std::uint64_t culled = 0, in_frustum = 0, surviving = 0, compliant = 0, measured = 0;
       column.clear();
       auto flush = [&] {
         if (pending_rows.empty()) return;
         scene.occluded(rays.data(), rays.size(), occ.data());
-        for (std::size_t p = 0; p < pending_rows.size(); ++p)
-          if (!occ[2 * p] && !occ[2 * p + 1]) column.push_back(pending_rows[p]);
+        for (std::size_t p = 0; p < pending_rows.size(); ++p) {
+          bool clear = true;
+          for (std::size_t q = 0; q < per_pair; ++q) clear &= !occ[per_pair * p + q];
+          if (clear) column.push_back(pending_rows[p]);
+        }
         pending_rows.clear();
         rays.clear();
       };
       for (std::uint32_t b = 0; b < blocks.size(); ++b) {
         const std::uint32_t begin = b * kBlock, end = std::min<std::uint32_t>(begin + kBlock, m.n_rows);
-        if (!sphere_may_touch_frustum(sensor, terms, v.scan_length_mm, rt * (blocks[b].centre - v.position), blocks[b].radius)) {
+        if (!sphere_may_touch_frustum(sensor, terms, scan_length, rt * (blocks[b].centre - v.position), blocks[b].radius)) {
           culled += end - begin;
           continue;
         }
         for (std::uint32_t i = begin; i < end; ++i) {
           const Eigen::Vector3d pc = rt * (rough.points[i] - v.position);
-          const PointTest t = test_point(sensor, terms, spec, v.scan_length_mm, pc, rt * rough.normals[i]);
+          PointTest t = test_point(sensor, terms, spec, scan_length, pc, rt * rough.normals[i]);
+          if (t.compliant && length_factor < 1.0) {
+            // Density uses the real sweep length: detuning narrows where we trust the view, not its sampling.
+            const PointTest real = test_point(sensor, terms, spec, v.scan_length_mm, pc, rt * rough.normals[i]);
+            t.compliant = real.compliant;
+          }
           in_frustum += t.in_frustum;
           surviving += t.facing;
           if (!t.compliant) continue;
           ++compliant;
           pending_rows.push_back(i);
-          rays.resize(rays.size() + 2);
-          pair_rays(rough.points[i], rough.normals[i], v, yc, t, eps, &rays[rays.size() - 2]);
+          rays.resize(rays.size() + per_pair);
+          pair_rays(rough.points[i], rough.normals[i], v, r, t, eps, cm.visibility_margin_mm, &rays[rays.size() - per_pair]);
           if (pending_rows.size() == kPairsPerFlush) flush();
         }
       }
@@ -188,7 +226,7 @@ MeasurabilityMatrix build_measurability(const RoughModel& rough, const Occlusion
       cnt.in_frustum += in_frustum;
       cnt.surviving += surviving;
       cnt.compliant += compliant;
-      cnt.rays += 2 * compliant;
+      cnt.rays += per_pair * compliant;
       cnt.measurable += measured;
     }
   });
@@ -225,7 +263,7 @@ MeasurabilityMatrix build_measurability_naive(const RoughModel& rough, const Occ
             t.receiver_y_mm = t.laser_y_mm + sensor.baseline_mm;
           }
           tests[i - b] = t;
-          pair_rays(rough.points[i], rough.normals[i], v, r.col(1), t, eps, &rays[2 * (i - b)]);
+          pair_rays(rough.points[i], rough.normals[i], v, r, t, eps, 0.0, &rays[2 * (i - b)]);
         }
         scene.occluded(rays.data(), 2 * (e - b), occ.data());
         cnt.rays += 2 * (e - b);
@@ -247,7 +285,7 @@ bool measurable(const RoughModel& rough, const OcclusionScene& scene, const Sens
       test_point(sensor, spec, v.scan_length_mm, r.transpose() * (rough.points[row] - v.position), r.transpose() * rough.normals[row]);
   if (!t.compliant) return false;
   OcclusionRay rays[2];
-  pair_rays(rough.points[row], rough.normals[row], v, r.col(1), t, ray_offset(rough, settings), rays);
+  pair_rays(rough.points[row], rough.normals[row], v, r, t, ray_offset(rough, settings), 0.0, rays);
   std::uint8_t occ[2];
   scene.occluded(rays, 2, occ);
   return !occ[0] && !occ[1];

@@ -68,10 +68,27 @@ struct MatrixStats {
   std::uint64_t pairs_measurable = 0;
 };
 
+/// Measurability countermeasures against positioner pose error (thesis 7.4.7): detuned tests that leave a
+/// margin, sized from tables 7.3-7.5 (pose_error.hpp: countermeasures_for).
+struct Countermeasures {
+  double frustum_detune = 0.0;       // shrink the frustum's width and the sweep length by this fraction
+  double dof_margin_mm = 0.0;        // raise R_min and lower R_max by this much
+  double compliance_buffer = 0.0;    // require σz ≤ spec/(1 + b) and ρ ≥ spec·(1 + b)
+  double visibility_margin_mm = 0.0; // near-miss visibility: laser and receiver displaced by ± this in camera
+                                     // x and y must see the point too
+  bool any() const { return frustum_detune > 0 || dof_margin_mm > 0 || compliance_buffer > 0 || visibility_margin_mm > 0; }
+};
+
+/// The sensor and specification the detuned tests use (depth of field shrunk, spec tightened); the frustum's
+/// width and sweep length are narrowed by the matrix builder itself (the sample spacing does not change).
+SensorModel detuned_sensor(const SensorModel& sensor, const Countermeasures& c);
+ModelSpec detuned_spec(const ModelSpec& spec, const Countermeasures& c);
+
 struct MatrixSettings {
   /// Occlusion rays start this far off the surface along the normal, and stop this short of the sensor.
   /// Zero means: 1 % of the rough model's mean edge length.
   double ray_offset_mm = 0.0;
+  Countermeasures countermeasures;  // none by default
 };
 
 /// Builds M in parallel over candidates (oneTBB). Rows are visited in the rough model's Morton order, blocks of

@@ -45,22 +45,6 @@ std::vector<Eigen::Vector3d> face_normals(const TriangleMesh& m) {
 
 }  // namespace
 
-ScanPose perturb_pose(const ScanPose& pose, double sigma_mm, double sigma_rad, std::uint64_t seed) {
-  if (sigma_mm <= 0.0 && sigma_rad <= 0.0) return pose;
-  std::mt19937_64 rng(seed);
-  std::normal_distribution<double> g(0.0, 1.0);
-  Eigen::Vector3d w(g(rng), g(rng), g(rng)), t(g(rng), g(rng), g(rng));
-  w *= sigma_rad;
-  t *= sigma_mm;
-  Eigen::Isometry3d delta = Eigen::Isometry3d::Identity();
-  if (w.norm() > 0.0) delta.linear() = Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix();
-  delta.translation() = t;
-  ScanPose out = pose;
-  // The error is the end effector's: expressed in the camera frame, about the camera origin.
-  out.camera_to_object = pose.camera_to_object * delta;
-  return out;
-}
-
 Verification verify_views(const TriangleMesh& fine, const SensorModel& sensor, const ModelSpec& spec,
                           const std::vector<ScanPose>& views, const std::vector<double>& estimated_cumulative,
                           const VerifyOptions& options) {
@@ -85,7 +69,7 @@ Verification verify_views(const TriangleMesh& fine, const SensorModel& sensor, c
   double cumulative = 0.0;
   for (std::size_t k = 0; k < views.size(); ++k) {
     ViewVerification& vv = out.views[k];
-    vv.executed = perturb_pose(views[k], options.pose_error_mm, options.pose_error_rad, mix_seed(options.seed, k, 1));
+    vv.executed = sample_pose_error(views[k], options.pose_error, mix_seed(options.pose_seed, k, 1));
     ScanOptions so;
     so.seed = mix_seed(options.seed, k, 0);
     so.noise = options.noise;
@@ -181,6 +165,27 @@ Verification verify_views(const TriangleMesh& fine, const SensorModel& sensor, c
   }
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return out;
+}
+
+MonteCarloResult verify_monte_carlo(const TriangleMesh& fine, const SensorModel& sensor, const ModelSpec& spec,
+                                    const std::vector<ScanPose>& views, const VerifyOptions& options, int trials) {
+  if (trials < 1) throw std::invalid_argument("verify_monte_carlo: trials must be >= 1");
+  const auto t0 = std::chrono::steady_clock::now();
+  MonteCarloResult r;
+  VerifyOptions o = options;
+  o.analytic = false;
+  for (int t = 0; t < trials; ++t) {
+    o.pose_seed = mix_seed(options.pose_seed, static_cast<std::uint64_t>(t), 7);
+    r.mv.push_back(verify_views(fine, sensor, spec, views, {}, o).mv);
+  }
+  double s = 0.0, s2 = 0.0;
+  for (double m : r.mv) s += m, s2 += m * m;
+  r.mean = s / trials;
+  r.sd = trials > 1 ? std::sqrt(std::max(0.0, (s2 - trials * r.mean * r.mean) / (trials - 1))) : 0.0;
+  r.min = *std::min_element(r.mv.begin(), r.mv.end());
+  r.max = *std::max_element(r.mv.begin(), r.mv.end());
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return r;
 }
 
 std::string verification_summary(const Verification& v) {

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "planner/mesh.hpp"
+#include "planner/pose_error.hpp"
 #include "planner/sensor.hpp"
 #include "planner/viewpoint.hpp"
 #include "planner/virtual_scanner.hpp"
@@ -18,10 +19,10 @@
 namespace scancell::planner {
 
 struct VerifyOptions {
-  std::uint64_t seed = 1;          // noise and pose-error streams (per view: mix_seed(seed, view))
+  std::uint64_t seed = 1;          // range-noise streams (per view: mix_seed(seed, view))
   bool noise = true;
-  double pose_error_mm = 0.0;      // σ of the positioner's translation error per axis (thesis ch. 7)
-  double pose_error_rad = 0.0;     // σ of its rotation error per axis
+  PoseErrorModel pose_error;       // positioner error (thesis 7.2.4), drawn per view
+  std::uint64_t pose_seed = 1;     // pose-error stream (per view: mix_seed(pose_seed, view, 1))
   double ray_offset_mm = 0.02;
   bool analytic = true;            // also evaluate the analytic test on the fine mesh (QUALITY-TARGETS' m_v)
 };
@@ -62,8 +63,16 @@ inline ScanPose scan_pose(const Viewpoint& v) {
   return p;
 }
 
-/// Applies a positioner pose error: rotation about a random axis and a translation, both Gaussian per axis.
-ScanPose perturb_pose(const ScanPose& pose, double sigma_mm, double sigma_rad, std::uint64_t seed);
+/// Monte Carlo over pose error (thesis fig. 7.12-7.15): the plan executed `trials` times, each with its own
+/// pose-error draw (pose_seed = mix_seed(options.pose_seed, trial)) and the same range-noise stream, so zero
+/// error reproduces the deterministic m_v exactly.
+struct MonteCarloResult {
+  std::vector<double> mv;  // per trial
+  double mean = 0.0, sd = 0.0, min = 0.0, max = 0.0;
+  double seconds = 0.0;
+};
+MonteCarloResult verify_monte_carlo(const TriangleMesh& fine_mm, const SensorModel& sensor, const ModelSpec& spec,
+                                    const std::vector<ScanPose>& views, const VerifyOptions& options, int trials);
 
 /// A table for people: per view samples, alone / gain / unique area, cumulative verified vs estimated.
 std::string verification_summary(const Verification& v);

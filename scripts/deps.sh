@@ -7,7 +7,7 @@ PKGS=(
   libeigen3-dev libembree-dev libassimp-dev libopenmesh-dev libtbb-dev
   libyaml-cpp-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev libpng-dev
-  coinor-libcbc-dev
+  coinor-libcbc-dev liborocos-kdl-dev libfcl-dev
 )
 missing=()
 for p in "${PKGS[@]}"; do

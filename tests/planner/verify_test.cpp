@@ -139,13 +139,13 @@ TEST(Verify, PoseErrorErodesCoverageAndIsSeeded) {
   sp::VerifyOptions opt;
   opt.analytic = false;
   const auto exact = sp::verify_views(strip, s, spec, views, {}, opt);
-  opt.pose_error_mm = 8.0;
-  opt.pose_error_rad = 0.05;
+  opt.pose_error = {8.0, 0.05, 0.05};
   const auto a = sp::verify_views(strip, s, spec, views, {}, opt);
   const auto b = sp::verify_views(strip, s, spec, views, {}, opt);
   EXPECT_LT(a.mv, exact.mv);
   EXPECT_EQ(a.mv, b.mv);  // same seed, same result
   EXPECT_FALSE(a.views[0].executed.camera_to_object.isApprox(views[0].camera_to_object));
+  EXPECT_EQ(exact.views[0].executed.camera_to_object.matrix(), views[0].camera_to_object.matrix());
   // The perturbed pose is still a rigid motion.
   const Eigen::Matrix3d r = a.views[0].executed.camera_to_object.linear();
   EXPECT_TRUE((r.transpose() * r).isApprox(Eigen::Matrix3d::Identity(), 1e-12));
