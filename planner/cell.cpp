@@ -326,6 +326,35 @@ bool CollisionChecker::collides(const Eigen::Isometry3d& camera_to_object, doubl
   return false;
 }
 
+TriangleMesh fixture_mesh(const CellModel& c) {
+  TriangleMesh m;
+  const Eigen::Isometry3d table_to_object = c.object_on_table.inverse();
+  for (const auto& f : c.fixtures) {
+    const auto base = static_cast<std::uint32_t>(m.vertices.size());
+    for (int k = 0; k < 8; ++k) {
+      const Eigen::Vector3d corner((k & 1) ? f.box.max.x() : f.box.min.x(), (k & 2) ? f.box.max.y() : f.box.min.y(),
+                                   (k & 4) ? f.box.max.z() : f.box.min.z());
+      m.vertices.push_back(table_to_object * corner);
+    }
+    // Outward-wound faces of the box (corner bit 0: x, bit 1: y, bit 2: z).
+    const int faces[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+    for (const auto& q : faces) {
+      m.triangles.push_back({base + q[0], base + q[1], base + q[2]});
+      m.triangles.push_back({base + q[0], base + q[2], base + q[3]});
+    }
+  }
+  return m;
+}
+
+TriangleMesh with_fixtures(const TriangleMesh& object, const CellModel& c) {
+  TriangleMesh m = object;
+  const TriangleMesh f = fixture_mesh(c);
+  const auto base = static_cast<std::uint32_t>(m.vertices.size());
+  m.vertices.insert(m.vertices.end(), f.vertices.begin(), f.vertices.end());
+  for (const auto& t : f.triangles) m.triangles.push_back({base + t[0], base + t[1], base + t[2]});
+  return m;
+}
+
 std::vector<std::size_t> travel_order(const CellModel& c, const std::vector<JointVector>& targets, const JointVector& start) {
   const std::size_t n = targets.size();
   std::vector<std::size_t> order;

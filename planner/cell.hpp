@@ -120,6 +120,13 @@ class CollisionChecker {
   Impl* impl_;
 };
 
+/// The cell's fixtures as closed box meshes in the object frame (they occlude rays like the object does).
+TriangleMesh fixture_mesh(const CellModel& cell);
+
+/// `object` with the fixtures appended (their triangles after the object's, so triangle ids below
+/// object.triangles.size() are the object's).
+TriangleMesh with_fixtures(const TriangleMesh& object, const CellModel& cell);
+
 /// Execution order minimising total move time from `start`: nearest neighbour, then 2-opt (open path).
 std::vector<std::size_t> travel_order(const CellModel& cell, const std::vector<JointVector>& targets,
                                       const JointVector& start);

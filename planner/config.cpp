@@ -306,6 +306,24 @@ PlannerSettings load_planner_settings(const std::filesystem::path& file) {
   if (y.has("matrix")) {
     Section m = y.section("matrix");
     p.matrix.ray_offset_mm = m.non_negative("ray_offset_mm", p.matrix.ray_offset_mm);
+    if (m.has("countermeasures")) {
+      const YAML::Node n = m.raw("countermeasures");
+      if (n.IsScalar()) {
+        const std::string v = n.Scalar();
+        if (v == "auto") p.countermeasures_from_cell = true;
+        else if (v == "none") p.countermeasures_from_cell = false;
+        else m.fail(m.key_path("countermeasures"), "must be auto, none or a mapping, got '" + v + "'");
+      } else {
+        Section k = m.section("countermeasures");
+        auto& cm = p.matrix.countermeasures;
+        cm.frustum_detune = k.non_negative("frustum_detune", 0.0);
+        if (!(cm.frustum_detune < 0.9)) k.fail(k.key_path("frustum_detune"), "must be in [0, 0.9)");
+        cm.dof_margin_mm = k.non_negative("dof_margin_mm", 0.0);
+        cm.compliance_buffer = k.non_negative("compliance_buffer", 0.0);
+        cm.visibility_margin_mm = k.non_negative("visibility_margin_mm", 0.0);
+        k.finish();
+      }
+    }
     m.finish();
   }
   y.finish();

@@ -15,6 +15,8 @@ struct PlannerSettings {
   ViewpointSettings viewpoints;
   CoverSettings cover;
   MatrixSettings matrix;
+  /// matrix.countermeasures: auto — size them from the cell's pose-error model (tables 7.3-7.5); needs a cell.
+  bool countermeasures_from_cell = false;
   std::uint64_t seed = 1;
 };
 

@@ -1,13 +1,19 @@
 #include "planner/plan.hpp"
 
+#include "planner/errors.hpp"
+
 #include <chrono>
 #include <cstdio>
+#include <array>
 #include <map>
+#include <memory>
+#include <set>
 #include <numbers>
 #include <sstream>
 
 #include <tbb/global_control.h>
 #include <tbb/info.h>
+#include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
 namespace scancell::planner {
@@ -21,10 +27,26 @@ nlohmann::json vec(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
 }  // namespace
 
 ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const ModelSpec& spec,
-                    const PlannerSettings& settings, const RoughModelOptions& rough_options, int threads) {
+                    const PlannerSettings& settings_in, const RoughModelOptions& rough_options, int threads,
+                    const CellModel* cell_in) {
   validate(sensor);
   validate(spec);
   ViewPlan p;
+  PlannerSettings settings = settings_in;
+  if (settings.countermeasures_from_cell) {
+    if (!cell_in) throw ConfigError("matrix.countermeasures: auto needs a cell (--cell) for its pose-error model");
+    settings.matrix.countermeasures = countermeasures_for(sensor, cell_in->pose_error, settings.viewpoints.standoff_factor);
+  }
+  if (cell_in) {
+    // The object sits on the plate: its bounding box centred on the turntable axis, its lowest point on the
+    // table top, then the cell's configured offset.
+    Eigen::AlignedBox3d box;
+    for (const auto& v : object_mm.vertices) box.extend(v);
+    Eigen::Isometry3d place = Eigen::Isometry3d::Identity();
+    place.translation() = Eigen::Vector3d(-box.center().x(), -box.center().y(), -box.min().z());
+    p.cell = *cell_in;
+    p.cell->object_on_table = cell_in->object_on_table * place;
+  }
   p.sensor = sensor;
   p.spec = spec;
   p.settings = settings;
@@ -38,7 +60,9 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     p.times.rough_model_s = since(t);
 
     t = Clock::now();
-    const OcclusionScene scene(p.rough.mesh());
+    // In a cell the fixtures (the turntable plate) occlude too: the underside of an object on the plate is
+    // not measurable, whatever the rough model says.
+    const OcclusionScene scene(p.cell ? with_fixtures(p.rough.mesh(), *p.cell) : p.rough.mesh());
     p.times.scene_s = since(t);
 
     t = Clock::now();
@@ -56,6 +80,54 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
       }
       p.segments = rows_of.size();
     }
+    // With a cell: every candidate becomes the nearest pose the cell can reach (thesis 6.3.2) and is then
+    // evaluated at that pose; unreachable and colliding ones are dropped, duplicates (twists that collapse to
+    // one reachable pose) merged.
+    std::unique_ptr<CollisionChecker> checker;
+    if (p.cell) checker = std::make_unique<CollisionChecker>(*p.cell, p.rough.mesh());
+    auto fit_to_cell = [&](std::vector<Viewpoint>& cands) {
+      if (!p.cell) return;
+      std::vector<std::uint8_t> fate(cands.size(), 0);  // 0 kept as is, 1 moved, 2 unreachable, 3 collides
+      tbb::parallel_for(std::size_t{0}, cands.size(), [&](std::size_t i) {
+        Viewpoint& v = cands[i];
+        Eigen::Isometry3d desired;
+        desired.matrix() = v.transform();
+        const auto reach = nearest_reachable(*p.cell, desired, v.scan_length_mm);
+        if (!reach) {
+          fate[i] = 2;
+          return;
+        }
+        if (!reach->isApprox(desired, 1e-12)) {
+          Viewpoint moved = viewpoint_from_pose(reach->linear(), reach->translation(), v.scan_length_mm);
+          moved.standoff_mm = v.standoff_mm;
+          moved.target_row = v.target_row;
+          moved.twist_level = v.twist_level;
+          moved.tilt_rad = v.tilt_rad;
+          v = moved;
+          fate[i] = 1;
+        }
+        if (checker->collides(*reach, v.scan_length_mm)) fate[i] = 3;
+      });
+      std::vector<Viewpoint> kept;
+      std::set<std::array<long long, 12>> seen;
+      for (std::size_t i = 0; i < cands.size(); ++i) {
+        p.cell_report.moved += fate[i] == 1;
+        p.cell_report.unreachable += fate[i] == 2;
+        p.cell_report.colliding += fate[i] == 3;
+        if (fate[i] >= 2) continue;
+        const Eigen::Matrix4d m = cands[i].transform();
+        std::array<long long, 12> key{};
+        for (int k = 0; k < 12; ++k)
+          key[k] = std::llround(m(k / 4, k % 4) * (k % 4 == 3 ? 1e6 : 1e9));
+        if (!seen.insert(key).second) {
+          ++p.cell_report.duplicates;
+          continue;
+        }
+        kept.push_back(cands[i]);
+      }
+      cands = std::move(kept);
+    };
+    fit_to_cell(candidates);
     p.candidates = candidates.size();
     p.times.viewpoints_s = since(t);
 
@@ -66,8 +138,9 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     p.generation.rows_unmeasurable_before = unmeasurable.size();
     if (settings.viewpoints.open_direction_views && !unmeasurable.empty()) {
       const std::size_t max_rows = std::max<std::size_t>(16, p.rough.size() / static_cast<std::size_t>(std::max(1, settings.viewpoints.position_decimation)));
-      const auto extra = open_direction_viewpoints(p.rough, scene, sensor, spec, settings.viewpoints, unmeasurable, max_rows,
-                                                   &p.generation.open_direction_rows);
+      auto extra = open_direction_viewpoints(p.rough, scene, sensor, spec, settings.viewpoints, unmeasurable, max_rows,
+                                             &p.generation.open_direction_rows);
+      fit_to_cell(extra);
       // These views work far out, near the precision and density limits, where a rough model's averaged
       // normals make the estimate least reliable: their columns claim only rows measured with a margin
       // (a detuned test, thesis 7.4.7; 10 % was the best of 0, 10 and 25 % in bench_quality).
@@ -93,11 +166,52 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     p.times.matrix_s = since(t);
 
     t = Clock::now();
+    // Axis targets of every candidate, for costs and travel (IK seeded at home, so deterministic).
+    std::vector<JointVector> q_of;
+    if (p.cell) {
+      q_of.resize(candidates.size());
+      tbb::parallel_for(std::size_t{0}, candidates.size(), [&](std::size_t i) {
+        Eigen::Isometry3d pose;
+        pose.matrix() = candidates[i].transform();
+        const auto ik = inverse_kinematics(*p.cell, pose, candidates[i].scan_length_mm);
+        q_of[i] = ik.ok ? ik.q : p.cell->home();
+      });
+    }
     if (p.settings.cover.mode == CoverMode::exact) {
-      p.cover = exact_cover(matrix, p.rough.area_mm2, p.settings.cover, {}, &p.exact);
+      // With a cell, c_j is the view's expected time: its scan plus half the move from home (a view is entered
+      // and left, each roughly half-way across the envelope).
+      std::vector<double> cost;
+      if (p.cell)
+        for (std::size_t i = 0; i < candidates.size(); ++i)
+          cost.push_back(scan_time_s(*p.cell, candidates[i].scan_length_mm) +
+                         0.5 * move_time_s(*p.cell, p.cell->home(), q_of[i]) + 1e-3);
+      p.cover = exact_cover(matrix, p.rough.area_mm2, p.settings.cover, cost, &p.exact);
       p.exact_used = true;
     } else {
       p.cover = greedy_cover(matrix, p.rough.area_mm2, p.settings.cover);
+    }
+    if (p.cell && !p.cover.views.empty()) {
+      // Execute in the order that minimises travel from home; the cumulative figures follow that order.
+      std::vector<JointVector> targets;
+      for (auto j : p.cover.views) targets.push_back(q_of[j]);
+      const auto order = travel_order(*p.cell, targets, p.cell->home());
+      std::vector<std::uint32_t> ordered;
+      for (auto k : order) ordered.push_back(p.cover.views[k]);
+      CoverResult re = describe_cover(matrix, p.rough.area_mm2, p.settings.cover, ordered);
+      re.blocked_by_registration = p.cover.blocked_by_registration;
+      re.bridge_views = p.cover.bridge_views;
+      re.redundant_removed = p.cover.redundant_removed;
+      re.stop_reason = p.cover.stop_reason;
+      p.cover = re;
+      JointVector at = p.cell->home();
+      for (auto j : p.cover.views) {
+        p.view_axes.push_back(q_of[j]);
+        p.view_move_s.push_back(move_time_s(*p.cell, at, q_of[j]));
+        p.view_scan_s.push_back(scan_time_s(*p.cell, candidates[j].scan_length_mm));
+        p.cell_report.travel_s += p.view_move_s.back();
+        p.cell_report.scan_s += p.view_scan_s.back();
+        at = q_of[j];
+      }
     }
     for (auto j : p.cover.views) p.views.push_back(candidates[j]);
     p.times.cover_s = since(t);
@@ -197,6 +311,15 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
                      {"cumulative_estimated_measurability", p.cover.cumulative_fraction[k]},
                      {"cumulative_point_fraction", p.cover.cumulative_point_fraction[k]}});
   }
+  if (p.cell) {
+    for (std::size_t k = 0; k < p.views.size() && k < p.view_axes.size(); ++k) {
+      json axes;
+      for (std::size_t a = 0; a < p.cell->axes.size(); ++a) axes[p.cell->axes[a].name] = p.view_axes[k][a];
+      views[k]["axes"] = axes;
+      views[k]["move_time_s"] = p.view_move_s[k];
+      views[k]["scan_time_s"] = p.view_scan_s[k];
+    }
+  }
   j["views"] = views;
   json edges = json::array();
   for (const auto& e : p.cover.registration_edges) edges.push_back({{"a", e.a}, {"b", e.b}, {"sigma", e.sigma}});
@@ -240,6 +363,42 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
         {"cover", p.times.cover_s},
         {"total", p.times.total_s()}}},
       {"threads", p.threads}};
+  {
+    const Countermeasures& cm = p.settings.matrix.countermeasures;
+    j["settings"]["matrix"]["countermeasures"] = {{"frustum_detune", cm.frustum_detune},
+                                                  {"dof_margin_mm", cm.dof_margin_mm},
+                                                  {"compliance_buffer", cm.compliance_buffer},
+                                                  {"visibility_margin_mm", cm.visibility_margin_mm},
+                                                  {"from_cell_pose_error", p.settings.countermeasures_from_cell}};
+  }
+  if (p.cell) {
+    const auto& c = *p.cell;
+    json axes = json::array();
+    for (const auto& a : c.axes)
+      axes.push_back({{"name", a.name}, {"type", a.type == AxisType::rotary ? "rotary" : "linear"}, {"home", a.home},
+                      {"unit", a.type == AxisType::rotary ? "rad" : "mm"}});
+    json fixtures = json::array();
+    for (const auto& f : c.fixtures)
+      fixtures.push_back({{"name", f.name}, {"frame", "table"},
+                          {"min_mm", {f.box.min.x(), f.box.min.y(), f.box.min.z()}},
+                          {"max_mm", {f.box.max.x(), f.box.max.y(), f.box.max.z()}}});
+    json place = json::array();
+    for (int r = 0; r < 4; ++r)
+      for (int k = 0; k < 4; ++k) place.push_back(c.object_on_table.matrix()(r, k));
+    j["cell"] = {{"name", c.name},
+                 {"kinematics", c.kinematics == CellKinematics::turntable_lift_tilt ? "turntable_lift_tilt" : "arm_turntable"},
+                 {"axes", axes},
+                 {"object_on_table_row_major", place},
+                 {"fixtures", fixtures},
+                 {"pose_error", {{"sigma_p_mm", c.pose_error.sigma_p_mm}, {"sigma_a_rad", c.pose_error.sigma_a_rad}, {"sigma_t_rad", c.pose_error.sigma_t_rad}}}};
+    j["summary"]["cell"] = {{"candidates_moved_to_reachable", p.cell_report.moved},
+                            {"candidates_unreachable", p.cell_report.unreachable},
+                            {"candidates_colliding", p.cell_report.colliding},
+                            {"candidates_merged", p.cell_report.duplicates},
+                            {"travel_time_s", p.cell_report.travel_s},
+                            {"scan_time_s", p.cell_report.scan_s},
+                            {"total_time_s", p.cell_report.travel_s + p.cell_report.scan_s}};
+  }
   if (p.exact_used) {
     const ExactReport& e = p.exact;
     j["summary"]["solver"] = {{"name", e.solver},

@@ -7,6 +7,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include <optional>
+
+#include "planner/cell.hpp"
 #include "planner/config.hpp"
 #include "planner/cover.hpp"
 #include "planner/exact_cover.hpp"
@@ -47,15 +50,24 @@ struct ViewPlan {
   std::vector<Viewpoint> views;  // in selection order
   CoverResult cover;
   ExactReport exact;        // filled when settings.cover.mode == exact
+  std::optional<CellModel> cell;  // the cell planned for, with the object's placement on the table
+  struct CellReport {
+    std::size_t moved = 0, unreachable = 0, colliding = 0, duplicates = 0;
+    double travel_s = 0.0, scan_s = 0.0;
+  } cell_report;
+  std::vector<JointVector> view_axes;  // per view, in plan order
+  std::vector<double> view_move_s, view_scan_s;
   bool exact_used = false;
   StageTimes times;
   int threads = 0;
 };
 
 /// Plans views for an object already in millimetres. `threads` = 0 uses all cores; the plan does not depend
-/// on it.
+/// on it. With a cell: candidates are moved to the nearest reachable pose and checked for collisions, the
+/// object is placed on the table, views are ordered for least travel and carry their axis targets.
 ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const ModelSpec& spec,
-                    const PlannerSettings& settings, const RoughModelOptions& rough_options, int threads = 0);
+                    const PlannerSettings& settings, const RoughModelOptions& rough_options, int threads = 0,
+                    const CellModel* cell = nullptr);
 
 /// The documented plan file (docs/plan-format.md).
 nlohmann::json plan_to_json(const ViewPlan& plan);

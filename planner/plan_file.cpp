@@ -5,6 +5,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "planner/cell.hpp"
 #include "planner/config.hpp"
 #include "planner/errors.hpp"
 
@@ -84,7 +85,38 @@ PlanFile load_plan_file(const std::filesystem::path& path) {
     p.viewpoints.push_back(viewpoint_from_pose(rot, m.topRightCorner<3, 1>(), pose.scan_length_mm));
     p.estimated_cumulative.push_back(est);
   }
+  if (j.contains("cell")) {
+    const json& cell = j["cell"];
+    const json& name = r.member(cell, "cell", "name");
+    if (!name.is_string()) r.fail("cell.name", "must be a string");
+    p.cell = name.get<std::string>();
+    p.object_on_table = r.matrix(r.member(cell, "cell", "object_on_table_row_major"), "cell.object_on_table_row_major");
+    if (cell.contains("fixtures")) {
+      const json& fx = cell["fixtures"];
+      if (!fx.is_array()) r.fail("cell.fixtures", "must be an array");
+      for (std::size_t k = 0; k < fx.size(); ++k) {
+        const std::string at = "cell.fixtures[" + std::to_string(k) + "]";
+        Eigen::Vector3d lo, hi;
+        for (auto [key, out] : {std::pair<const char*, Eigen::Vector3d*>{"min_mm", &lo}, {"max_mm", &hi}}) {
+          const json& v = r.member(fx[k], at, key);
+          if (!v.is_array() || v.size() != 3) r.fail(at + "." + key, "must be 3 numbers");
+          for (int i = 0; i < 3; ++i) (*out)[i] = r.number(v[i], at + "." + key);
+        }
+        if (!(lo.array() < hi.array()).all()) r.fail(at + ".max_mm", "must exceed min_mm");
+        p.table_fixtures.emplace_back(lo, hi);
+      }
+    }
+  }
   return p;
+}
+
+TriangleMesh PlanFile::fixtures_in_object_frame() const {
+  CellModel c;
+  Eigen::Isometry3d t;
+  t.matrix() = object_on_table;
+  c.object_on_table = t;
+  for (const auto& [lo, hi] : table_fixtures) c.fixtures.push_back({"fixture", true, {lo, hi}});
+  return fixture_mesh(c);
 }
 
 }  // namespace scancell::planner

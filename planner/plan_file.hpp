@@ -7,6 +7,7 @@
 
 #include <Eigen/Core>
 
+#include "planner/mesh.hpp"
 #include "planner/sensor.hpp"
 #include "planner/viewpoint.hpp"
 #include "planner/virtual_scanner.hpp"
@@ -22,6 +23,11 @@ struct PlanFile {
   std::vector<ScanPose> views;                    // selection order
   std::vector<Viewpoint> viewpoints;              // the same views as viewpoints (axis, twist, scan length)
   std::vector<double> estimated_cumulative;       // the planner's cumulative estimated measurability per view
+  std::string cell;                               // the cell planned for, empty if none
+  Eigen::Matrix4d object_on_table = Eigen::Matrix4d::Identity();  // object frame in the table frame
+  std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> table_fixtures;  // boxes (min, max) in the table frame
+  /// The fixtures as a mesh in the object frame (empty without a cell).
+  TriangleMesh fixtures_in_object_frame() const;
 };
 
 /// Throws DataError (structure, values) or ConfigError (the embedded sensor / spec) naming file and path.

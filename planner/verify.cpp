@@ -59,7 +59,13 @@ Verification verify_views(const TriangleMesh& fine, const SensorModel& sensor, c
   for (double a : out.vertex_area_mm2) out.area_mm2 += a;
   const auto vertex_normals = area_weighted_normals(fine);
   const auto tri_normals = face_normals(fine);
-  const OcclusionScene scene(fine);
+  TriangleMesh scene_mesh = fine;
+  if (!options.occluders.triangles.empty()) {
+    const auto base = static_cast<std::uint32_t>(scene_mesh.vertices.size());
+    scene_mesh.vertices.insert(scene_mesh.vertices.end(), options.occluders.vertices.begin(), options.occluders.vertices.end());
+    for (const auto& t : options.occluders.triangles) scene_mesh.triangles.push_back({base + t[0], base + t[1], base + t[2]});
+  }
+  const OcclusionScene scene(scene_mesh);
   const double radius = 1.0 / std::sqrt(spec.density_per_mm2);
 
   std::vector<std::vector<std::uint32_t>> measured_by(views.size());
@@ -74,6 +80,7 @@ Verification verify_views(const TriangleMesh& fine, const SensorModel& sensor, c
     so.seed = mix_seed(options.seed, k, 0);
     so.noise = options.noise;
     so.ray_offset_mm = options.ray_offset_mm;
+    so.object_triangles = options.occluders.triangles.empty() ? 0 : fine.triangles.size();
     const RangeImage img = virtual_scan(scene, sensor, vv.executed, so, &vv.scan);
 
     SampleGrid grid;
@@ -144,7 +151,13 @@ Verification verify_views(const TriangleMesh& fine, const SensorModel& sensor, c
   if (options.analytic && !views.empty()) {
     // The analytic test of the planner, evaluated on the fine mesh at the executed poses.
     const RoughModel fine_rows = make_rough_model(fine);
-    const OcclusionScene rows_scene(fine_rows.mesh());
+    TriangleMesh rows_mesh = fine_rows.mesh();
+    if (!options.occluders.triangles.empty()) {
+      const auto base = static_cast<std::uint32_t>(rows_mesh.vertices.size());
+      rows_mesh.vertices.insert(rows_mesh.vertices.end(), options.occluders.vertices.begin(), options.occluders.vertices.end());
+      for (const auto& t : options.occluders.triangles) rows_mesh.triangles.push_back({base + t[0], base + t[1], base + t[2]});
+    }
+    const OcclusionScene rows_scene(rows_mesh);
     std::vector<Viewpoint> vps;
     for (const auto& vv : out.views)
       vps.push_back(viewpoint_from_pose(vv.executed.camera_to_object.linear(), vv.executed.camera_to_object.translation(),

@@ -25,6 +25,7 @@ struct VerifyOptions {
   std::uint64_t pose_seed = 1;     // pose-error stream (per view: mix_seed(pose_seed, view, 1))
   double ray_offset_mm = 0.02;
   bool analytic = true;            // also evaluate the analytic test on the fine mesh (QUALITY-TARGETS' m_v)
+  TriangleMesh occluders;          // cell fixtures in the object frame (the plate): they block, they are not measured
 };
 
 struct ViewVerification {

@@ -215,7 +215,8 @@ std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const Occlus
         double nearest2 = std::numeric_limits<double>::infinity();
         for (const auto& q : rough.points) nearest2 = std::min(nearest2, (q - pos).squaredNorm());
         if (nearest2 < st.clearance_mm * st.clearance_mm) return 3;
-        if (auto hit = scene.first_hit(pos, out_dir, 0.0, 1e7)) {
+        if (auto hit = scene.first_hit(pos, out_dir, 0.0, 1e7); hit && hit->triangle < rough.triangles.size()) {
+          // (Triangles past the rough model's are cell fixtures: leaving through one says nothing of the object.)
           const Triangle& t = rough.triangles[hit->triangle];
           const Eigen::Vector3d fn =
               (rough.points[t[1]] - rough.points[t[0]]).cross(rough.points[t[2]] - rough.points[t[0]]);

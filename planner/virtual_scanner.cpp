@@ -86,7 +86,7 @@ RangeImage virtual_scan(const OcclusionScene& scene, const SensorModel& s, const
       to_receiver.clear();
       for (int i = 0; i < img.columns; ++i) {
         const Hit& h = hits[i];
-        if (h.triangle == kNoHit) { ++c_missed; continue; }
+        if (h.triangle == kNoHit || (options.object_triangles && h.triangle >= options.object_triangles)) { ++c_missed; continue; }
         const double z = h.t;
         if (z < s.range_min_mm) { ++c_close; continue; }
         const Eigen::Vector3d p(laser.x() + tan_x[i] * z, laser.y() + tan_y * z, -z);

@@ -50,7 +50,7 @@ struct RangeImage {
 /// Why rays gave no sample (each ray counts once, in this order).
 struct ScanStats {
   std::uint64_t rays = 0;
-  std::uint64_t missed = 0;             // nothing within R_max
+  std::uint64_t missed = 0;             // nothing within R_max (or a fixture, not the object, was hit)
   std::uint64_t too_close = 0;          // first surface nearer than R_min
   std::uint64_t back_facing = 0;        // surface faces away from laser or receiver
   std::uint64_t beyond_grazing = 0;     // θxz ≥ t_xz or θyz ≥ t_yz
@@ -62,6 +62,9 @@ struct ScanOptions {
   std::uint64_t seed = 1;       // noise stream; same seed, same image, any thread count
   bool noise = true;            // false: the noise-free image (tests, diagnostics)
   double ray_offset_mm = 0.02;  // receiver rays start this far off the surface along its normal
+  /// Triangles at or past this index belong to cell fixtures (the plate): they block rays but are not the
+  /// object, so a laser hit on them is no sample. 0: every triangle is the object.
+  std::size_t object_triangles = 0;
 };
 
 /// Executes one view. Parallel over profiles (oneTBB); deterministic.

@@ -40,6 +40,8 @@ const char* kPlanUsage =
     "  --cover greedy|constrained|exact   override the settings' cover mode (exact: CBC integer program,\n"
     "                            registration enforced when t_r > 0, greedy warm start, cover.exact_time_limit_s)\n"
     "  --threads N               worker threads (default all cores; the plan does not depend on it)\n"
+    "  --cell CELL.yaml          plan for this cell (config/cells): reachable, collision-free views with their\n"
+    "                            axis targets, in the order of least travel\n"
     "  --quiet                   no summary table\n";
 
 const char* kVerifyUsage =
@@ -64,7 +66,10 @@ const char* kVerifyUsage =
     "  --quiet                    no table\n"
     "usage: scancell scan --plan PLAN.json --view K --out IMAGE.ply [--fine MESH] [--scale K | --fit-mm L] "
     "[--seed N] [--no-noise]\n"
-    "  one view of the plan through the virtual scanner, saved as a range image (docs/range-image-format.md)\n";
+    "  one view of the plan through the virtual scanner, saved as a range image (docs/range-image-format.md)\n"
+    "usage: scancell pose-error --sensor SENSOR.yaml [--cell CELL.yaml] [--sigma-p-mm S] [--sigma-a-rad S]\n"
+    "       [--sigma-t-rad S] [--fd F]\n"
+    "  expected relative precision, density, footprint and depth-of-field erosion, suggested f_d, countermeasures\n";
 
 /// Simple --key value parser that refuses unknown or repeated options.
 std::map<std::string, std::string> parse(int argc, char** argv, const std::vector<std::string>& with_value,
@@ -117,7 +122,7 @@ void write_json(const std::string& out, const nlohmann::json& j) {
 int cmd_plan(int argc, char** argv) {
   const auto o = parse(argc, argv,
                        {"--mesh", "--sensor", "--spec", "--settings", "--out", "--scale", "--fit-mm", "--rough-vertices",
-                        "--rho-rel", "--rough-noise-mm", "--seed", "--cover", "--threads", "--segments"},
+                        "--rho-rel", "--rough-noise-mm", "--seed", "--cover", "--threads", "--segments", "--cell"},
                        {"--quiet"});
   for (const char* k : {"--mesh", "--sensor", "--spec", "--out"})
     if (!o.count(k)) throw UsageError(std::string("missing ") + k);
@@ -172,7 +177,9 @@ int cmd_plan(int argc, char** argv) {
                        std::to_string(mesh.vertices.size()) + " mesh vertices");
   }
 
-  sp::ViewPlan plan = sp::plan_views(std::move(mesh), sensor, spec, settings, rough, threads);
+  std::optional<sp::CellModel> cell;
+  if (o.count("--cell")) cell = sp::load_cell(o.at("--cell"));
+  sp::ViewPlan plan = sp::plan_views(std::move(mesh), sensor, spec, settings, rough, threads, cell ? &*cell : nullptr);
   plan.object = source;
   if (plan.rough_report.faces_rejected_by_decimator)
     std::cerr << "scancell: decimator rejected " << plan.rough_report.faces_rejected_by_decimator << " non-manifold faces\n";
@@ -221,6 +228,7 @@ int cmd_verify(int argc, char** argv) {
   if (opt.pose_error.sigma_p_mm < 0.0 || opt.pose_error.sigma_a_rad < 0.0 || opt.pose_error.sigma_t_rad < 0.0)
     throw UsageError("pose error sigmas must be >= 0");
   opt.pose_seed = opt.seed;
+  opt.occluders = plan.fixtures_in_object_frame();  // a plan made for a cell is verified with its plate
   const int trials = o.count("--pose-error") ? static_cast<int>(whole(o, "--pose-error")) : 0;
   if (o.count("--pose-error") && (trials < 1 || trials > 100000)) throw UsageError("--pose-error: trials must be in [1, 100000]");
   const int threads = o.count("--threads") ? static_cast<int>(whole(o, "--threads")) : 0;
@@ -291,8 +299,14 @@ int cmd_scan(int argc, char** argv) {
   if (k >= plan.views.size())
     throw UsageError("--view " + std::to_string(k) + ": the plan has " + std::to_string(plan.views.size()) + " views");
   const sp::TriangleMesh fine = place_fine(plan, o);
-  const sp::OcclusionScene scene(fine);
+  sp::TriangleMesh with_plate = fine;
+  const sp::TriangleMesh plate = plan.fixtures_in_object_frame();
+  const auto base = static_cast<std::uint32_t>(with_plate.vertices.size());
+  with_plate.vertices.insert(with_plate.vertices.end(), plate.vertices.begin(), plate.vertices.end());
+  for (const auto& t : plate.triangles) with_plate.triangles.push_back({base + t[0], base + t[1], base + t[2]});
+  const sp::OcclusionScene scene(with_plate);
   sp::ScanOptions so;
+  so.object_triangles = plate.triangles.empty() ? 0 : fine.triangles.size();
   so.seed = sp::mix_seed(o.count("--seed") ? whole(o, "--seed") : 1, k, 0);
   so.noise = !o.count("--no-noise");
   sp::ScanStats st;
@@ -304,6 +318,22 @@ int cmd_scan(int argc, char** argv) {
   return 0;
 }
 
+int cmd_pose_error(int argc, char** argv) {
+  const auto o = parse(argc, argv, {"--sensor", "--cell", "--fd", "--sigma-p-mm", "--sigma-a-rad", "--sigma-t-rad"}, {});
+  if (!o.count("--sensor")) throw UsageError("missing --sensor");
+  const sp::SensorModel sensor = sp::load_sensor(o.at("--sensor"));
+  sp::PoseErrorModel e;
+  if (o.count("--cell")) e = sp::load_cell(o.at("--cell")).pose_error;
+  if (o.count("--sigma-p-mm")) e.sigma_p_mm = number(o, "--sigma-p-mm");
+  if (o.count("--sigma-a-rad")) e.sigma_a_rad = number(o, "--sigma-a-rad");
+  if (o.count("--sigma-t-rad")) e.sigma_t_rad = number(o, "--sigma-t-rad");
+  if (e.sigma_p_mm < 0 || e.sigma_a_rad < 0 || e.sigma_t_rad < 0) throw UsageError("pose error sigmas must be >= 0");
+  const double fd = o.count("--fd") ? number(o, "--fd") : 1.02;
+  if (!(fd >= 1.0 && fd <= 2.0)) throw UsageError("--fd must be in [1, 2]");
+  std::cout << sp::pose_error_report(sensor, e, fd);
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -311,7 +341,8 @@ int main(int argc, char** argv) {
     std::cerr << "usage: scancell COMMAND [options]\ncommands:\n"
                  "  plan    plan the views that measure an object to a specification\n"
                  "  verify  execute a plan with the virtual scanner on the fine model: verified measurability\n"
-                 "  scan    one view of a plan through the virtual scanner, saved as a range image\n\n"
+                 "  scan    one view of a plan through the virtual scanner, saved as a range image\n"
+                 "  pose-error  the thesis' single-view pose-error effects (tables 7.3-7.5) for a sensor and cell\n\n"
               << kPlanUsage << kVerifyUsage;
     return argc < 2 ? 2 : 0;
   }
@@ -325,6 +356,7 @@ int main(int argc, char** argv) {
     if (cmd == "plan") return cmd_plan(argc - 2, argv + 2);
     if (cmd == "verify") return cmd_verify(argc - 2, argv + 2);
     if (cmd == "scan") return cmd_scan(argc - 2, argv + 2);
+    if (cmd == "pose-error") return cmd_pose_error(argc - 2, argv + 2);
     std::cerr << "scancell: unknown command '" << cmd << "'\n";
     return 2;
   } catch (const UsageError& e) {
