@@ -348,10 +348,7 @@ TriangleMesh fixture_mesh(const CellModel& c) {
 
 TriangleMesh with_fixtures(const TriangleMesh& object, const CellModel& c) {
   TriangleMesh m = object;
-  const TriangleMesh f = fixture_mesh(c);
-  const auto base = static_cast<std::uint32_t>(m.vertices.size());
-  m.vertices.insert(m.vertices.end(), f.vertices.begin(), f.vertices.end());
-  for (const auto& t : f.triangles) m.triangles.push_back({base + t[0], base + t[1], base + t[2]});
+  append_mesh(m, fixture_mesh(c));
   return m;
 }
 

@@ -28,6 +28,16 @@ struct UnionFind {
   void unite(std::uint32_t a, std::uint32_t b) { p[find(a)] = find(b); }
 };
 
+/// The rows no column measures and the measurable share of the weight (both results report them).
+double fill_unmeasurable(const MeasurabilityMatrix& m, const std::vector<double>& w, CoverResult& res) {
+  const double total = std::accumulate(w.begin(), w.end(), 0.0);
+  res.unmeasurable_rows = m.unmeasurable_rows();
+  double unmeasurable_w = 0.0;
+  for (auto r : res.unmeasurable_rows) unmeasurable_w += w[r];
+  res.measurable_fraction = total > 0 ? (total - unmeasurable_w) / total : 0.0;
+  return total;
+}
+
 }  // namespace
 
 namespace {
@@ -60,11 +70,7 @@ double shared_weight(const MeasurabilityColumn& a, const MeasurabilityColumn& b,
 CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>& w, const CoverSettings& st) {
   if (w.size() != m.n_rows) throw std::invalid_argument("greedy_cover: one weight per row required");
   CoverResult res;
-  const double total = std::accumulate(w.begin(), w.end(), 0.0);
-  res.unmeasurable_rows = m.unmeasurable_rows();
-  double unmeasurable_w = 0.0;
-  for (auto r : res.unmeasurable_rows) unmeasurable_w += w[r];
-  res.measurable_fraction = total > 0 ? (total - unmeasurable_w) / total : 0.0;
+  const double total = fill_unmeasurable(m, w, res);
   std::vector<double> col_weight(m.n_cols(), 0.0);
   for (std::uint32_t j = 0; j < m.n_cols(); ++j) {
     m.columns[j].for_each([&](std::uint32_t r) { col_weight[j] += w[r]; });
@@ -352,11 +358,7 @@ std::vector<std::uint32_t> order_by_gain(const MeasurabilityMatrix& m, const std
 CoverResult describe_cover(const MeasurabilityMatrix& m, const std::vector<double>& w, const CoverSettings& st,
                            const std::vector<std::uint32_t>& views) {
   CoverResult res;
-  const double total = std::accumulate(w.begin(), w.end(), 0.0);
-  res.unmeasurable_rows = m.unmeasurable_rows();
-  double unmeasurable_w = 0.0;
-  for (auto r : res.unmeasurable_rows) unmeasurable_w += w[r];
-  res.measurable_fraction = total > 0 ? (total - unmeasurable_w) / total : 0.0;
+  const double total = fill_unmeasurable(m, w, res);
   for (std::uint32_t j = 0; j < m.n_cols(); ++j) {
     double cw = 0.0;
     m.columns[j].for_each([&](std::uint32_t r) { cw += w[r]; });

@@ -43,6 +43,9 @@ void apply_scale(TriangleMesh& mesh, double scale);
 
 double triangle_area(const TriangleMesh& mesh, const Triangle& t);
 
+/// Appends `more` to `into` (its triangles after into's, so ids below the old count stay into's).
+void append_mesh(TriangleMesh& into, const TriangleMesh& more);
+
 /// Splits every edge longer than max_edge_mm at its midpoint (passes of conforming 1-to-2/3/4 triangle splits,
 /// winding kept) until none is: the surface is unchanged, only sampled more densely. Makes a coarse CAD or
 /// sample mesh a fine model whose vertices sample the surface evenly, so vertex-weighted m_v and ρ_rel mean the

@@ -244,6 +244,12 @@ double triangle_area(const TriangleMesh& mesh, const Triangle& t) {
 
 namespace scancell::planner {
 
+void append_mesh(TriangleMesh& into, const TriangleMesh& more) {
+  const auto base = static_cast<std::uint32_t>(into.vertices.size());
+  into.vertices.insert(into.vertices.end(), more.vertices.begin(), more.vertices.end());
+  for (const auto& t : more.triangles) into.triangles.push_back({base + t[0], base + t[1], base + t[2]});
+}
+
 TriangleMesh refine_edges(const TriangleMesh& mesh, double max_edge_mm) {
   if (!(max_edge_mm > 0.0)) throw std::invalid_argument("refine_edges: max_edge_mm must be > 0");
   TriangleMesh m = mesh;

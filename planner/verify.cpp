@@ -60,11 +60,7 @@ Verification verify_views(const TriangleMesh& fine, const SensorModel& sensor, c
   const auto vertex_normals = area_weighted_normals(fine);
   const auto tri_normals = face_normals(fine);
   TriangleMesh scene_mesh = fine;
-  if (!options.occluders.triangles.empty()) {
-    const auto base = static_cast<std::uint32_t>(scene_mesh.vertices.size());
-    scene_mesh.vertices.insert(scene_mesh.vertices.end(), options.occluders.vertices.begin(), options.occluders.vertices.end());
-    for (const auto& t : options.occluders.triangles) scene_mesh.triangles.push_back({base + t[0], base + t[1], base + t[2]});
-  }
+  append_mesh(scene_mesh, options.occluders);
   const OcclusionScene scene(scene_mesh);
   const double radius = 1.0 / std::sqrt(spec.density_per_mm2);
 
@@ -152,11 +148,7 @@ Verification verify_views(const TriangleMesh& fine, const SensorModel& sensor, c
     // The analytic test of the planner, evaluated on the fine mesh at the executed poses.
     const RoughModel fine_rows = make_rough_model(fine);
     TriangleMesh rows_mesh = fine_rows.mesh();
-    if (!options.occluders.triangles.empty()) {
-      const auto base = static_cast<std::uint32_t>(rows_mesh.vertices.size());
-      rows_mesh.vertices.insert(rows_mesh.vertices.end(), options.occluders.vertices.begin(), options.occluders.vertices.end());
-      for (const auto& t : options.occluders.triangles) rows_mesh.triangles.push_back({base + t[0], base + t[1], base + t[2]});
-    }
+    append_mesh(rows_mesh, options.occluders);
     const OcclusionScene rows_scene(rows_mesh);
     std::vector<Viewpoint> vps;
     for (const auto& vv : out.views)

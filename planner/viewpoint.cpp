@@ -21,6 +21,18 @@ Eigen::Vector3d twist_reference_x(const Eigen::Vector3d& zc) {
   return u.cross(zc).normalized();
 }
 
+/// The bisector-tilted twin of a view aimed at `target`: turned about camera x by `tilt` so the target's
+/// normal bisects the laser and receiver rays, at the same stand-off from the target.
+Viewpoint bisector_twin(const Viewpoint& v, const Eigen::Vector3d& target, double standoff, double tilt) {
+  const Eigen::Matrix3d rt = camera_rotation(v.axis, v.twist_rad, tilt);
+  Viewpoint t = v;
+  t.axis = -rt.col(2);
+  t.twist_rad = twist_towards(t.axis, rt.col(1));
+  t.position = target + standoff * rt.col(2);
+  t.tilt_rad = tilt;
+  return t;
+}
+
 /// What the neighbourhood of a targeted point tells the VARIABLE rules.
 struct Patch {
   double rise_mm = 0.0;                            // R_a: how far patch points stand towards the camera
@@ -244,12 +256,7 @@ std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const Occlus
         v.twist_level = level;
         per_position[k].push_back(v);
         if (st.bisector_tilt) {
-          const Eigen::Matrix3d rt = camera_rotation(v.axis, v.twist_rad, tilt);
-          Viewpoint t = v;
-          t.axis = -rt.col(2);
-          t.twist_rad = twist_towards(t.axis, rt.col(1));
-          t.position = s + standoff * rt.col(2);
-          t.tilt_rad = tilt;
+          const Viewpoint t = bisector_twin(v, s, standoff, tilt);
           if (clear_of_object(t.position)) per_position[k].push_back(t);
         }
       }
@@ -363,12 +370,7 @@ std::vector<Viewpoint> open_direction_viewpoints(const RoughModel& rough, const 
           per_row[k].push_back(v);
           if (st.bisector_tilt) {
             // Laser and receiver rays straddling the open direction: both fit a narrow opening.
-            const Eigen::Matrix3d rt = camera_rotation(v.axis, v.twist_rad, tilt);
-            Viewpoint t = v;
-            t.axis = -rt.col(2);
-            t.twist_rad = twist_towards(t.axis, rt.col(1));
-            t.position = p + standoff * rt.col(2);
-            t.tilt_rad = tilt;
+            const Viewpoint t = bisector_twin(v, p, standoff, tilt);
             double near2 = std::numeric_limits<double>::infinity();
             for (const auto& q : rough.points) near2 = std::min(near2, (q - t.position).squaredNorm());
             if (near2 >= st.clearance_mm * st.clearance_mm) per_row[k].push_back(t);

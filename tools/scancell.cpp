@@ -301,9 +301,7 @@ int cmd_scan(int argc, char** argv) {
   const sp::TriangleMesh fine = place_fine(plan, o);
   sp::TriangleMesh with_plate = fine;
   const sp::TriangleMesh plate = plan.fixtures_in_object_frame();
-  const auto base = static_cast<std::uint32_t>(with_plate.vertices.size());
-  with_plate.vertices.insert(with_plate.vertices.end(), plate.vertices.begin(), plate.vertices.end());
-  for (const auto& t : plate.triangles) with_plate.triangles.push_back({base + t[0], base + t[1], base + t[2]});
+  sp::append_mesh(with_plate, plate);
   const sp::OcclusionScene scene(with_plate);
   sp::ScanOptions so;
   so.object_triangles = plate.triangles.empty() ? 0 : fine.triangles.size();
