@@ -1,6 +1,7 @@
 // Pose-error benchmark (issue 5, thesis fig. 7.12-7.15): plans executed under sampled positioner error,
 // Monte Carlo over the error, without and with the 7.4.7 countermeasures sized for σ_a = 0.5°, σ_p = 0.5 mm.
-//   bench_pose [--meshes DIR] [--only a,b] [--trials N] [--threads N]
+//   bench_pose [--meshes DIR] [--only a,b] [--trials N] [--threads N] [--stress]
+// --stress replaces the issue's grid by larger errors (2-4°, 2-5 mm) to find where plans break.
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -26,17 +27,19 @@ int main(int argc, char** argv) {
   std::string meshes = std::string(SCANCELL_SOURCE_DIR) + "/../shared/meshes";
   std::set<std::string> only = {"convex-patch", "fandisk", "mushroom", "bunny00"};
   int trials = 8, threads = 0;
+  bool stress = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--meshes" && i + 1 < argc) meshes = argv[++i];
     else if (a == "--trials" && i + 1 < argc) trials = std::atoi(argv[++i]);
     else if (a == "--threads" && i + 1 < argc) threads = std::atoi(argv[++i]);
+    else if (a == "--stress") stress = true;
     else if (a == "--only" && i + 1 < argc) {
       only.clear();
       std::stringstream ss(argv[++i]);
       for (std::string t; std::getline(ss, t, ',');) only.insert(t);
     } else {
-      std::fprintf(stderr, "usage: bench_pose [--meshes DIR] [--only a,b] [--trials N] [--threads N]\n");
+      std::fprintf(stderr, "usage: bench_pose [--meshes DIR] [--only a,b] [--trials N] [--threads N] [--stress]\n");
       return 2;
     }
   }
@@ -60,13 +63,17 @@ int main(int argc, char** argv) {
                        }});
   }
   std::vector<sp::PoseErrorModel> grid;
-  for (double a : {0.0, 0.1, 0.25, 0.5, 1.0}) grid.push_back({0.0, a * deg, 0.0});
-  for (double p : {0.1, 0.5, 1.0}) grid.push_back({p, 0.0, 0.0});
-  grid.push_back(design);
+  if (stress) {
+    grid = {{0.0, 2.0 * deg, 0.0}, {0.0, 4.0 * deg, 0.0}, {2.0, 0.0, 0.0}, {5.0, 0.0, 0.0}, {2.0, 2.0 * deg, 2.0 * deg}};
+  } else {
+    for (double a : {0.0, 0.1, 0.25, 0.5, 1.0}) grid.push_back({0.0, a * deg, 0.0});
+    for (double p : {0.1, 0.5, 1.0}) grid.push_back({p, 0.0, 0.0});
+    grid.push_back(design);
+  }
 
   tbb::task_arena arena(threads > 0 ? threads : tbb::info::default_concurrency());
-  std::printf("%-14s %-16s %6s %9s %9s | %8s %8s %8s\n", "object", "plan", "views", "sigma_p", "sigma_a", "m_v_mean", "m_v_sd",
-              "m_v_min");
+  std::printf("%-14s %-16s %6s %9s %9s %9s | %8s %8s %8s\n", "object", "plan", "views", "sigma_p", "sigma_a", "sigma_t",
+              "m_v_mean", "m_v_sd", "m_v_min");
   arena.execute([&] {
     for (const auto& [name, make] : objects) {
       if (!only.count(name)) continue;
@@ -84,9 +91,9 @@ int main(int argc, char** argv) {
           sp::VerifyOptions o;
           o.pose_error = e;
           const auto mc = sp::verify_monte_carlo(fine, sensor, spec, poses, o, e.zero() ? 1 : trials);
-          std::printf("%-14s %-16s %6zu %9.2f %9.2f | %8.4f %8.4f %8.4f\n", name.c_str(),
-                      counter ? "countermeasures" : "plain", plan.views.size(), e.sigma_p_mm, e.sigma_a_rad / deg, mc.mean,
-                      mc.sd, mc.min);
+          std::printf("%-14s %-16s %6zu %9.2f %9.2f %9.2f | %8.4f %8.4f %8.4f\n", name.c_str(),
+                      counter ? "countermeasures" : "plain", plan.views.size(), e.sigma_p_mm, e.sigma_a_rad / deg,
+                      e.sigma_t_rad / deg, mc.mean, mc.sd, mc.min);
           std::fflush(stdout);
         }
       }
