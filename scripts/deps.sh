@@ -8,6 +8,7 @@ PKGS=(
   libyaml-cpp-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev libpng-dev
   coinor-libcbc-dev liborocos-kdl-dev libfcl-dev
+  libmodbus-dev mbpoll
 )
 missing=()
 for p in "${PKGS[@]}"; do

@@ -1,0 +1,72 @@
+#pragma once
+// Axis drivers behind one small interface (PX4 style: hardware and simulation plug in at the same seam).
+// Units at the interface: mm (linear) or rad (rotary); counts and scaling live in each driver's config.
+#include <chrono>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace scancell::drivers {
+
+/// Every hardware-layer failure, typed: which axis, which register or object, and why (Klipper style).
+struct DriverError : std::runtime_error {
+  enum class Kind { timeout, exception, connection, protocol, fault, refused, motion_timeout };
+  Kind kind;
+  std::string axis, where, cause;
+  DriverError(Kind k, std::string axis_name, std::string where_, std::string cause_)
+      : std::runtime_error(axis_name + ": " + where_ + ": " + cause_), kind(k), axis(std::move(axis_name)),
+        where(std::move(where_)), cause(std::move(cause_)) {}
+};
+const char* to_string(DriverError::Kind k);
+
+struct AxisState {
+  double position = 0.0;  // mm or rad
+  double velocity = 0.0;  // per second
+  bool enabled = false, homed = false, moving = false, in_position = false;
+  bool faulted = false;
+  std::uint16_t fault_code = 0;
+};
+
+class Axis {
+ public:
+  virtual ~Axis() = default;
+  virtual const std::string& name() const = 0;
+  virtual void enable() = 0;
+  virtual void disable() = 0;
+  virtual void home(std::chrono::milliseconds timeout) = 0;
+  /// Commands the move and waits for in-position; DriverError(motion_timeout) and a halt when it does not come.
+  virtual void move_to(double target, std::chrono::milliseconds timeout) = 0;
+  virtual void stop() = 0;  // controlled stop
+  virtual void halt() = 0;  // quick stop
+  virtual void reset_fault() = 0;
+  virtual AxisState state() = 0;
+};
+
+struct SoftLimits {
+  double min = 0.0, max = 0.0;
+};
+
+/// Named axes with soft limits checked before any command leaves the process.
+class Positioner {
+ public:
+  void add(std::unique_ptr<Axis> axis, SoftLimits limits);
+  Axis& axis(const std::string& name);
+  /// Moves the named axes one after another (each to in-position); a target outside its limits refuses the
+  /// whole move before anything is sent, naming the axis and the limit.
+  void move(const std::map<std::string, double>& targets, std::chrono::milliseconds timeout);
+  /// Quick-stops every axis (e-stop path); errors of individual axes are collected, not thrown midway.
+  std::vector<std::string> halt_all();
+  std::vector<std::string> names() const;
+
+ private:
+  struct Entry {
+    std::unique_ptr<Axis> axis;
+    SoftLimits limits;
+  };
+  std::map<std::string, Entry> axes_;
+};
+
+}  // namespace scancell::drivers

@@ -1,0 +1,271 @@
+#include "drivers/modbus_axis.hpp"
+
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <thread>
+
+#include <modbus/modbus.h>
+
+#include "drivers/modbus_map.hpp"
+
+namespace scancell::drivers {
+namespace mm = modbus_map;
+
+namespace {
+
+bool transient(int err) { return err == ETIMEDOUT || err == EMBXSBUSY || err == EMBBADCRC || err == EMBXACK; }
+bool connection_lost(int err) {
+  return err == ECONNRESET || err == EPIPE || err == EBADF || err == ECONNREFUSED || err == ENOTCONN || err == EIO;
+}
+
+std::string register_name(int addr) {
+  switch (addr) {
+    case mm::kCommand: return "register 0 (command)";
+    case mm::kStatus: return "register 1 (status)";
+    case mm::kTargetHi: return "registers 2-3 (target)";
+    case mm::kActualHi: return "registers 4-5 (actual position)";
+    case mm::kVelocityHi: return "registers 6-7 (profile velocity)";
+    default: return "register " + std::to_string(addr);
+  }
+}
+
+const char* fault_name(std::uint16_t code) {
+  switch (code) {
+    case mm::kFollowingError: return "following error";
+    case mm::kLimitHit: return "limit switch";
+    case mm::kNotHomed: return "not homed";
+    case mm::kNotEnabled: return "not enabled";
+    default: return "drive fault";
+  }
+}
+
+}  // namespace
+
+const char* to_string(DriverError::Kind k) {
+  switch (k) {
+    case DriverError::Kind::timeout: return "timeout";
+    case DriverError::Kind::exception: return "exception";
+    case DriverError::Kind::connection: return "connection";
+    case DriverError::Kind::protocol: return "protocol";
+    case DriverError::Kind::fault: return "fault";
+    case DriverError::Kind::refused: return "refused";
+    case DriverError::Kind::motion_timeout: return "motion timeout";
+  }
+  return "?";
+}
+
+ModbusAxis::ModbusAxis(ModbusConfig config) : cfg_(std::move(config)) { connect(); }
+
+ModbusAxis::~ModbusAxis() {
+  if (ctx_) {
+    modbus_close(ctx_);
+    modbus_free(ctx_);
+  }
+}
+
+void ModbusAxis::connect() {
+  if (ctx_) {
+    modbus_close(ctx_);
+    modbus_free(ctx_);
+    ctx_ = nullptr;
+  }
+  ctx_ = cfg_.transport == ModbusConfig::Transport::tcp
+             ? modbus_new_tcp(cfg_.host.c_str(), cfg_.port)
+             : modbus_new_rtu(cfg_.device.c_str(), cfg_.baud, cfg_.parity, 8, 1);
+  if (!ctx_) throw DriverError(DriverError::Kind::connection, cfg_.name, "context", std::strerror(errno));
+  modbus_set_slave(ctx_, cfg_.unit_id);
+  const auto us = std::chrono::duration_cast<std::chrono::microseconds>(cfg_.response_timeout).count();
+  modbus_set_response_timeout(ctx_, static_cast<std::uint32_t>(us / 1000000), static_cast<std::uint32_t>(us % 1000000));
+  if (modbus_connect(ctx_) != 0) {
+    const std::string where = cfg_.transport == ModbusConfig::Transport::tcp
+                                  ? cfg_.host + ":" + std::to_string(cfg_.port)
+                                  : cfg_.device;
+    const int err = errno;
+    modbus_free(ctx_);
+    ctx_ = nullptr;
+    throw DriverError(DriverError::Kind::connection, cfg_.name, where, modbus_strerror(err));
+  }
+}
+
+void ModbusAxis::fail(DriverError::Kind kind, const std::string& where, const std::string& cause) {
+  faulted_ = true;
+  throw DriverError(kind, cfg_.name, where, cause);
+}
+
+void ModbusAxis::refuse_if_faulted(const std::string& what) const {
+  if (faulted_) throw DriverError(DriverError::Kind::refused, cfg_.name, what, "axis is faulted: reset_fault() first");
+}
+
+void ModbusAxis::reconnect(const std::string& where) {
+  auto backoff = cfg_.reconnect_backoff;
+  for (int attempt = 0; attempt < cfg_.reconnect_attempts; ++attempt) {
+    std::this_thread::sleep_for(backoff);
+    backoff *= 2;
+    try {
+      connect();
+      return;
+    } catch (const DriverError&) {
+    }
+  }
+  fail(DriverError::Kind::connection, where, "connection lost, " + std::to_string(cfg_.reconnect_attempts) + " reconnects failed");
+}
+
+void ModbusAxis::read(int addr, int n, std::uint16_t* out, const std::string& what) {
+  if (!ctx_) reconnect(register_name(addr));
+  for (int attempt = 0;; ++attempt) {
+    if (modbus_read_registers(ctx_, addr, n, out) == n) return;
+    const int err = errno;
+    if (connection_lost(err)) {
+      reconnect(register_name(addr));
+      continue;  // reads are safe to repeat
+    }
+    if (transient(err) && attempt < cfg_.retries) continue;
+    fail(transient(err) ? DriverError::Kind::timeout : DriverError::Kind::exception, register_name(addr),
+         what + ": " + modbus_strerror(err));
+  }
+}
+
+void ModbusAxis::write(int addr, int n, const std::uint16_t* values, const std::string& what) {
+  if (!ctx_) reconnect(register_name(addr));
+  for (int attempt = 0;; ++attempt) {
+    if (modbus_write_registers(ctx_, addr, n, values) == n) return;
+    const int err = errno;
+    if (connection_lost(err)) {
+      // The write may or may not have reached the drive: reconnect, but let the caller decide from the state.
+      reconnect(register_name(addr));
+      fail(DriverError::Kind::connection, register_name(addr),
+           what + ": connection lost during the write; reconnected, command not re-sent");
+    }
+    if (transient(err) && attempt < cfg_.retries) continue;
+    fail(transient(err) ? DriverError::Kind::timeout : DriverError::Kind::exception, register_name(addr),
+         what + ": " + modbus_strerror(err));
+  }
+}
+
+void ModbusAxis::command(std::uint16_t cmd, const std::string& what) {
+  const std::uint16_t v = cmd;
+  write(mm::kCommand, 1, &v, what);
+}
+
+AxisState ModbusAxis::state() {
+  std::uint16_t r[mm::kCount] = {};
+  read(0, mm::kCount, r, "state");
+  AxisState s;
+  s.position = mm::get_i32(r, mm::kActualHi) / cfg_.counts_per_unit;
+  s.velocity = mm::get_i32(r, mm::kActualVelocityHi) / cfg_.counts_per_unit;
+  s.enabled = r[mm::kStatus] & mm::kEnabled;
+  s.homed = r[mm::kStatus] & mm::kHomed;
+  s.moving = r[mm::kStatus] & mm::kMoving;
+  s.in_position = r[mm::kStatus] & mm::kInPosition;
+  s.faulted = (r[mm::kStatus] & mm::kFault) || faulted_;
+  s.fault_code = r[mm::kFaultCode];
+  return s;
+}
+
+void ModbusAxis::wait_for(std::uint16_t bits, std::chrono::milliseconds timeout, const std::string& what) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (true) {
+    std::uint16_t r[2] = {};
+    read(mm::kStatus, 1, r, what);
+    if (r[0] & mm::kFault) {
+      std::uint16_t code = 0;
+      read(mm::kFaultCode, 1, &code, what);
+      fail(DriverError::Kind::fault, "register 1 (status)", what + ": drive reports " + fault_name(code));
+    }
+    if ((r[0] & bits) == bits && !(r[0] & mm::kMoving)) return;
+    if (std::chrono::steady_clock::now() > deadline) {
+      try {
+        command(mm::kHalt, "halt after " + what + " timeout");
+      } catch (const DriverError&) {
+      }
+      fail(DriverError::Kind::motion_timeout, "register 1 (status)", what + ": not done within " + std::to_string(timeout.count()) + " ms; halted");
+    }
+    std::this_thread::sleep_for(cfg_.poll_period);
+  }
+}
+
+void ModbusAxis::enable() {
+  refuse_if_faulted("enable");
+  command(mm::kEnable, "enable");
+  wait_for(mm::kEnabled, std::chrono::milliseconds(500), "enable");
+}
+
+void ModbusAxis::disable() { command(mm::kDisable, "disable"); }
+
+void ModbusAxis::home(std::chrono::milliseconds timeout) {
+  refuse_if_faulted("home");
+  command(mm::kHome, "home");
+  wait_for(mm::kHomed | mm::kInPosition, timeout, "home");
+}
+
+void ModbusAxis::move_to(double target, std::chrono::milliseconds timeout) {
+  refuse_if_faulted("move");
+  if (!std::isfinite(target)) throw DriverError(DriverError::Kind::refused, cfg_.name, "move", "target is not finite");
+  const auto counts = static_cast<std::int32_t>(std::llround(target * cfg_.counts_per_unit));
+  const auto vel = static_cast<std::int32_t>(std::llround(cfg_.profile_velocity * cfg_.counts_per_unit));
+  std::uint16_t tv[2];
+  mm::put_i32(tv, 0, counts);
+  write(mm::kTargetHi, 2, tv, "move target");
+  std::uint16_t vv[2];
+  mm::put_i32(vv, 0, vel);
+  write(mm::kVelocityHi, 2, vv, "move velocity");
+  command(mm::kMove, "move");
+  wait_for(mm::kInPosition, timeout, "move to " + std::to_string(target));
+}
+
+void ModbusAxis::stop() { command(mm::kStop, "stop"); }
+
+void ModbusAxis::halt() { command(mm::kHalt, "halt"); }
+
+void ModbusAxis::reset_fault() {
+  faulted_ = false;
+  command(mm::kResetFault, "reset fault");
+}
+
+// ---- Positioner ----
+
+void Positioner::add(std::unique_ptr<Axis> axis, SoftLimits limits) {
+  const std::string n = axis->name();
+  if (!(limits.min < limits.max)) throw DriverError(DriverError::Kind::refused, n, "soft limits", "min must be below max");
+  axes_[n] = Entry{std::move(axis), limits};
+}
+
+Axis& Positioner::axis(const std::string& name) {
+  auto it = axes_.find(name);
+  if (it == axes_.end()) throw DriverError(DriverError::Kind::refused, name, "positioner", "no such axis");
+  return *it->second.axis;
+}
+
+std::vector<std::string> Positioner::names() const {
+  std::vector<std::string> out;
+  for (const auto& [n, e] : axes_) out.push_back(n);
+  return out;
+}
+
+void Positioner::move(const std::map<std::string, double>& targets, std::chrono::milliseconds timeout) {
+  // Every target is checked before any command leaves the process.
+  for (const auto& [n, t] : targets) {
+    auto it = axes_.find(n);
+    if (it == axes_.end()) throw DriverError(DriverError::Kind::refused, n, "move", "no such axis");
+    const SoftLimits& l = it->second.limits;
+    if (!(t >= l.min && t <= l.max))
+      throw DriverError(DriverError::Kind::refused, n, "soft limit",
+                        "target " + std::to_string(t) + " outside [" + std::to_string(l.min) + ", " + std::to_string(l.max) + "]");
+  }
+  for (const auto& [n, t] : targets) axes_.at(n).axis->move_to(t, timeout);
+}
+
+std::vector<std::string> Positioner::halt_all() {
+  std::vector<std::string> errors;
+  for (auto& [n, e] : axes_) {
+    try {
+      e.axis->halt();
+    } catch (const DriverError& err) {
+      errors.push_back(err.what());
+    }
+  }
+  return errors;
+}
+
+}  // namespace scancell::drivers

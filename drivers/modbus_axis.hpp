@@ -1,0 +1,67 @@
+#pragma once
+// An axis on a Modbus drive (libmodbus, TCP or RTU) speaking the register map of docs/modbus-register-map.md.
+// Transient errors (timeout, slave busy, bad CRC) retry within the budget, then the axis faults; a lost
+// connection reconnects with backoff and the axis re-reads the drive's state before anything else — a move is
+// never re-sent blindly.
+#include <chrono>
+#include <string>
+
+#include "drivers/axis.hpp"
+
+struct _modbus;  // libmodbus context (modbus_t)
+
+namespace scancell::drivers {
+
+struct ModbusConfig {
+  std::string name;                        // the axis name in messages and in the cell
+  enum class Transport { tcp, rtu } transport = Transport::tcp;
+  std::string host = "127.0.0.1";
+  int port = 1502;
+  std::string device;                      // RTU serial device (/dev/ttyUSB0, a pty in tests)
+  int baud = 115200;
+  char parity = 'N';
+  int unit_id = 1;
+  double counts_per_unit = 1000.0;         // drive counts per mm (linear) or per rad (rotary)
+  double profile_velocity = 50.0;          // mm/s or rad/s for moves
+  std::chrono::milliseconds response_timeout{150};
+  int retries = 2;                         // extra attempts for transient errors
+  std::chrono::milliseconds reconnect_backoff{50};  // doubled per attempt
+  int reconnect_attempts = 3;
+  std::chrono::milliseconds poll_period{5};
+};
+
+class ModbusAxis : public Axis {
+ public:
+  explicit ModbusAxis(ModbusConfig config);
+  ~ModbusAxis() override;
+  ModbusAxis(const ModbusAxis&) = delete;
+  ModbusAxis& operator=(const ModbusAxis&) = delete;
+
+  const std::string& name() const override { return cfg_.name; }
+  void enable() override;
+  void disable() override;
+  void home(std::chrono::milliseconds timeout) override;
+  void move_to(double target, std::chrono::milliseconds timeout) override;
+  void stop() override;
+  void halt() override;
+  void reset_fault() override;
+  AxisState state() override;
+  /// The driver gave up on the drive (retries exhausted or a drive fault): only reset_fault() is accepted.
+  bool faulted() const { return faulted_; }
+
+ private:
+  void connect();
+  void reconnect(const std::string& where);
+  void read(int addr, int n, std::uint16_t* out, const std::string& what);
+  void write(int addr, int n, const std::uint16_t* values, const std::string& what);
+  void command(std::uint16_t cmd, const std::string& what);
+  void wait_for(std::uint16_t bits, std::chrono::milliseconds timeout, const std::string& what);
+  [[noreturn]] void fail(DriverError::Kind kind, const std::string& where, const std::string& cause);
+  void refuse_if_faulted(const std::string& what) const;
+
+  ModbusConfig cfg_;
+  _modbus* ctx_ = nullptr;
+  bool faulted_ = false;
+};
+
+}  // namespace scancell::drivers

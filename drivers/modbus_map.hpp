@@ -1,0 +1,40 @@
+#pragma once
+// The scancell Modbus axis register map (docs/modbus-register-map.md), shared by the driver and the simulator.
+#include <cstdint>
+
+namespace scancell::drivers::modbus_map {
+
+// Holding registers (function codes 3 read, 6/16 write), addresses 0-based.
+constexpr int kCommand = 0;         // write: Command below
+constexpr int kStatus = 1;          // read: Status bits below
+constexpr int kTargetHi = 2;        // int32 target position in counts: high word at 2, low word at 3
+constexpr int kActualHi = 4;        // int32 actual position in counts: high word at 4, low word at 5
+constexpr int kVelocityHi = 6;      // int32 profile velocity in counts/s (write), high word first
+constexpr int kActualVelocityHi = 8;  // int32 actual velocity in counts/s (read)
+constexpr int kFaultCode = 10;      // read: FaultCode below
+constexpr int kHeartbeat = 11;      // read: increments every simulator/drive cycle (10 ms)
+constexpr int kCount = 12;
+
+enum Command : std::uint16_t { kNone = 0, kEnable = 1, kDisable = 2, kHome = 3, kMove = 4, kStop = 5, kHalt = 6, kResetFault = 7 };
+
+enum Status : std::uint16_t {
+  kEnabled = 1u << 0,
+  kHomed = 1u << 1,
+  kMoving = 1u << 2,
+  kInPosition = 1u << 3,
+  kFault = 1u << 4,
+  kLimit = 1u << 5,
+};
+
+enum FaultCode : std::uint16_t { kNoFault = 0, kFollowingError = 1, kLimitHit = 2, kNotHomed = 3, kNotEnabled = 4 };
+
+inline void put_i32(std::uint16_t* regs, int hi, std::int32_t v) {
+  const auto u = static_cast<std::uint32_t>(v);
+  regs[hi] = static_cast<std::uint16_t>(u >> 16);
+  regs[hi + 1] = static_cast<std::uint16_t>(u & 0xFFFFu);
+}
+inline std::int32_t get_i32(const std::uint16_t* regs, int hi) {
+  return static_cast<std::int32_t>((static_cast<std::uint32_t>(regs[hi]) << 16) | regs[hi + 1]);
+}
+
+}  // namespace scancell::drivers::modbus_map
