@@ -1,0 +1,86 @@
+#pragma once
+// A CANopen CiA 402 drive as an Axis: NMT, expedited SDO (abort codes decoded), heartbeat consumer, the CiA 402
+// state machine (controlword 0x6040 / statusword 0x6041), profile position mode (0x6060 = 1, target 0x607A,
+// profile velocity 0x6081, new set-point handshake, target reached), homing mode (6), position actual 0x6064.
+//
+// Frames are struct can_frame read and written on a file descriptor: a SocketCAN raw socket in production
+// (CanLink::open_socketcan), one end of socketpair(AF_UNIX, SOCK_SEQPACKET) in tests (this kernel has no CAN).
+// The driver code is the same for both.
+#include <chrono>
+#include <cstdint>
+#include <string>
+
+#include <linux/can.h>
+
+#include "drivers/axis.hpp"
+
+namespace scancell::drivers {
+
+/// A CAN frame stream on a file descriptor (owned).
+class CanLink {
+ public:
+  explicit CanLink(int fd) : fd_(fd) {}
+  ~CanLink();
+  CanLink(const CanLink&) = delete;
+  CanLink& operator=(const CanLink&) = delete;
+  /// Raw SocketCAN socket bound to an interface (can0 ...): the production path.
+  static int open_socketcan(const std::string& interface);
+  void send(const can_frame& f);
+  /// Next frame within the timeout; false on timeout. Throws DriverError(connection) when the link is gone.
+  bool receive(can_frame& f, std::chrono::milliseconds timeout);
+  int fd() const { return fd_; }
+
+ private:
+  int fd_;
+};
+
+/// SDO abort code (CiA 301) in words.
+std::string sdo_abort_text(std::uint32_t code);
+
+struct CanOpenConfig {
+  std::string name;
+  int node_id = 1;
+  double counts_per_unit = 1000.0;
+  double profile_velocity = 50.0;                    // mm/s or rad/s
+  std::chrono::milliseconds sdo_timeout{100};
+  int sdo_retries = 1;
+  std::chrono::milliseconds heartbeat_timeout{300};  // consumer time: a silent drive faults the axis
+  std::chrono::milliseconds poll_period{5};
+};
+
+class CanOpenAxis : public Axis {
+ public:
+  CanOpenAxis(CanOpenConfig config, int fd);  // takes ownership of fd
+  const std::string& name() const override { return cfg_.name; }
+  void enable() override;
+  void disable() override;
+  void home(std::chrono::milliseconds timeout) override;
+  void move_to(double target, std::chrono::milliseconds timeout) override;
+  void stop() override;
+  void halt() override;
+  void reset_fault() override;
+  AxisState state() override;
+  bool faulted() const { return faulted_; }
+
+  // SDO client, public for diagnostics and tests.
+  void sdo_write(std::uint16_t index, std::uint8_t sub, std::uint32_t value, int bytes);
+  std::uint32_t sdo_read(std::uint16_t index, std::uint8_t sub);
+
+ private:
+  [[noreturn]] void fail(DriverError::Kind kind, const std::string& where, const std::string& cause);
+  void refuse_if_faulted(const std::string& what) const;
+  void nmt(std::uint8_t command);
+  void absorb(const can_frame& f);  // heartbeat and other unsolicited frames
+  void check_heartbeat(const std::string& what);
+  std::uint16_t statusword();
+  void wait_status(std::uint16_t mask, std::uint16_t value, std::chrono::milliseconds timeout, const std::string& what);
+
+  CanOpenConfig cfg_;
+  CanLink link_;
+  bool faulted_ = false;
+  bool homed_ = false;  // CiA 402 has no homed bit outside homing mode: the driver remembers a completed homing
+  std::chrono::steady_clock::time_point last_heartbeat_;
+  bool heartbeat_seen_ = false;
+};
+
+}  // namespace scancell::drivers
