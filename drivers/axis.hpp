@@ -1,6 +1,7 @@
 #pragma once
 // Axis drivers behind one small interface (PX4 style: hardware and simulation plug in at the same seam).
 // Units at the interface: mm (linear) or rad (rotary); counts and scaling live in each driver's config.
+#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <map>
@@ -61,7 +62,14 @@ class Positioner {
   std::vector<std::string> halt_all();
   std::vector<std::string> names() const;
 
+  /// E-stop latch: halts every axis now; move() is refused until reset_estop().
+  std::vector<std::string> latch_estop(const std::string& why);
+  void reset_estop();
+  bool estop_latched() const { return latched_; }
+
  private:
+  std::atomic<bool> latched_{false};
+  std::string latch_reason_;
   struct Entry {
     std::unique_ptr<Axis> axis;
     SoftLimits limits;

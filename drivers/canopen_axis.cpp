@@ -129,6 +129,7 @@ void CanOpenAxis::nmt(std::uint8_t command) {
 }
 
 void CanOpenAxis::sdo_write(std::uint16_t index, std::uint8_t sub, std::uint32_t value, int bytes) {
+  std::lock_guard<std::mutex> lock(io_);  // one SDO transaction at a time (an e-stop halt may come from another thread)
   const std::string where = object_name(index, sub);
   for (int attempt = 0;; ++attempt) {
     can_frame f{};
@@ -160,6 +161,7 @@ void CanOpenAxis::sdo_write(std::uint16_t index, std::uint8_t sub, std::uint32_t
 }
 
 std::uint32_t CanOpenAxis::sdo_read(std::uint16_t index, std::uint8_t sub) {
+  std::lock_guard<std::mutex> lock(io_);
   const std::string where = object_name(index, sub);
   for (int attempt = 0;; ++attempt) {
     can_frame f{};

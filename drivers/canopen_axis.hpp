@@ -8,6 +8,7 @@
 // The driver code is the same for both.
 #include <chrono>
 #include <cstdint>
+#include <mutex>
 #include <string>
 
 #include <linux/can.h>
@@ -76,6 +77,7 @@ class CanOpenAxis : public Axis {
   void wait_status(std::uint16_t mask, std::uint16_t value, std::chrono::milliseconds timeout, const std::string& what);
 
   CanOpenConfig cfg_;
+  std::mutex io_;
   CanLink link_;
   bool faulted_ = false;
   bool homed_ = false;  // CiA 402 has no homed bit outside homing mode: the driver remembers a completed homing

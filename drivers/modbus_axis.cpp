@@ -112,6 +112,8 @@ void ModbusAxis::reconnect(const std::string& where) {
 }
 
 void ModbusAxis::read(int addr, int n, std::uint16_t* out, const std::string& what) {
+  // One transaction at a time on the context: the e-stop's halt may come from another thread mid-move.
+  std::lock_guard<std::recursive_mutex> lock(io_);
   if (!ctx_) reconnect(register_name(addr));
   for (int attempt = 0;; ++attempt) {
     if (modbus_read_registers(ctx_, addr, n, out) == n) return;
@@ -127,6 +129,7 @@ void ModbusAxis::read(int addr, int n, std::uint16_t* out, const std::string& wh
 }
 
 void ModbusAxis::write(int addr, int n, const std::uint16_t* values, const std::string& what) {
+  std::lock_guard<std::recursive_mutex> lock(io_);
   if (!ctx_) reconnect(register_name(addr));
   for (int attempt = 0;; ++attempt) {
     if (modbus_write_registers(ctx_, addr, n, values) == n) return;
@@ -212,6 +215,12 @@ void ModbusAxis::move_to(double target, std::chrono::milliseconds timeout) {
   write(mm::kVelocityHi, 2, vv, "move velocity");
   command(mm::kMove, "move");
   wait_for(mm::kInPosition, timeout, "move to " + std::to_string(target));
+  // In position but elsewhere: the move was stopped (halt, e-stop) before its target.
+  std::uint16_t actual[2];
+  read(mm::kActualHi, 2, actual, "move result");
+  if (std::llabs(static_cast<long long>(mm::get_i32(actual, 0)) - counts) > 1)
+    fail(DriverError::Kind::fault, "registers 4-5 (actual position)",
+         "move to " + std::to_string(target) + " interrupted at " + std::to_string(mm::get_i32(actual, 0) / cfg_.counts_per_unit));
 }
 
 void ModbusAxis::stop() { command(mm::kStop, "stop"); }
@@ -243,7 +252,17 @@ std::vector<std::string> Positioner::names() const {
   return out;
 }
 
+std::vector<std::string> Positioner::latch_estop(const std::string& why) {
+  latched_ = true;
+  latch_reason_ = why;
+  return halt_all();
+}
+
+void Positioner::reset_estop() { latched_ = false; }
+
 void Positioner::move(const std::map<std::string, double>& targets, std::chrono::milliseconds timeout) {
+  if (latched_)
+    throw DriverError(DriverError::Kind::refused, "positioner", "e-stop", "latched (" + latch_reason_ + "): reset first");
   // Every target is checked before any command leaves the process.
   for (const auto& [n, t] : targets) {
     auto it = axes_.find(n);

@@ -4,6 +4,7 @@
 // connection reconnects with backoff and the axis re-reads the drive's state before anything else — a move is
 // never re-sent blindly.
 #include <chrono>
+#include <mutex>
 #include <string>
 
 #include "drivers/axis.hpp"
@@ -60,6 +61,7 @@ class ModbusAxis : public Axis {
   void refuse_if_faulted(const std::string& what) const;
 
   ModbusConfig cfg_;
+  std::recursive_mutex io_;  // serialises transactions (reconnect nests inside read/write)
   _modbus* ctx_ = nullptr;
   bool faulted_ = false;
 };

@@ -1,0 +1,106 @@
+// Trigger pulse trains and the interlock (e-stop latch) on simulated lines; the e-stop halts real Modbus
+// drives (simulated peers over TCP) within one control cycle and refuses motion until reset.
+#include <chrono>
+#include <thread>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "drivers/gpio.hpp"
+#include "drivers/modbus_axis.hpp"
+#include "drivers/modbus_map.hpp"
+#include "drivers/sim/modbus_sim.hpp"
+
+namespace dr = scancell::drivers;
+namespace sim = scancell::drivers::sim;
+using namespace std::chrono_literals;
+using ::testing::HasSubstr;
+
+TEST(Gpio, TriggerFiresTheArmedPulseTrain) {
+  dr::SimOutput out;
+  dr::Trigger trig(out);
+  EXPECT_THROW(trig.fire(), dr::DriverError);  // not armed
+  trig.arm(20, 200us, 1000us);
+  trig.fire();
+  trig.wait_done(1000ms);
+  EXPECT_EQ(trig.pulses_fired(), 20);
+  EXPECT_EQ(out.rising_edges(), 20u);
+  const auto ch = out.changes();
+  ASSERT_EQ(ch.size(), 40u);
+  // 20 pulses at a 1 ms period take at least 19 ms from first rise to last rise.
+  EXPECT_GE(ch[38].first - ch[0].first, 19ms);
+  EXPECT_THROW(trig.arm(0, 200us, 1000us), dr::DriverError);
+  EXPECT_THROW(trig.arm(5, 2000us, 1000us), dr::DriverError);
+}
+
+TEST(Gpio, GpiodLinesThatDoNotExistAreRefusedByName) {
+  // This kernel has no GPIO chips: the libgpiod path must fail cleanly, naming chip and offset.
+  try {
+    dr::GpiodOutput out("gpiochip7", 3);
+    GTEST_SKIP() << "a gpiochip7 exists here";
+  } catch (const dr::DriverError& e) {
+    EXPECT_EQ(e.kind, dr::DriverError::Kind::connection);
+    EXPECT_THAT(e.where, HasSubstr("gpiochip7:3"));
+  }
+}
+
+TEST(Interlock, EstopHaltsEveryAxisAtOnceAndLatchesUntilReset) {
+  sim::ModbusDriveSim d1, d2;
+  dr::ModbusConfig c1, c2;
+  c1.name = "reach";
+  c1.port = d1.serve_tcp(15100);
+  c2.name = "lift";
+  c2.port = d2.serve_tcp(c1.port + 1);
+  for (auto* c : {&c1, &c2}) c->profile_velocity = 20.0;  // mm/s: a 30 mm move takes 1.5 s
+  dr::Positioner pos;
+  pos.add(std::make_unique<dr::ModbusAxis>(c1), {-500, 500});
+  pos.add(std::make_unique<dr::ModbusAxis>(c2), {-500, 500});
+  for (const char* n : {"reach", "lift"}) {
+    pos.axis(n).enable();
+    pos.axis(n).home(2000ms);
+  }
+  dr::SimInput estop(false);
+  dr::Interlock interlock(estop, nullptr, pos);
+  std::exception_ptr moving_error;
+  std::thread mover([&] {
+    try {
+      pos.axis("reach").move_to(30.0, 5000ms);
+    } catch (...) {
+      moving_error = std::current_exception();
+    }
+  });
+  std::this_thread::sleep_for(200ms);
+  const auto pressed = std::chrono::steady_clock::now();
+  estop.drive(true);
+  // Both drives see a halt within one control cycle (the interlock waits 20 ms per edge poll; Modbus on
+  // loopback adds about a millisecond): 50 ms is the bound asserted.
+  bool halted = false;
+  while (std::chrono::steady_clock::now() - pressed < 50ms && !halted) {
+    auto has_halt = [](const sim::ModbusDriveSim& d) {
+      for (const auto& c : d.commands())
+        if (c.command == dr::modbus_map::kHalt) return true;
+      return false;
+    };
+    halted = has_halt(d1) && has_halt(d2);
+    std::this_thread::sleep_for(1ms);
+  }
+  EXPECT_TRUE(halted);
+  mover.join();
+  ASSERT_TRUE(moving_error);  // the interrupted move reports itself
+  try {
+    std::rethrow_exception(moving_error);
+  } catch (const dr::DriverError& e) {
+    EXPECT_THAT(e.cause, HasSubstr("interrupted"));
+  }
+  EXPECT_LT(d1.actual_counts(), 30000);
+  // Latched: motion refused before anything is sent; reset refused while the e-stop is still pressed.
+  const auto sent = d2.commands().size();
+  EXPECT_THROW(pos.move({{"lift", 5.0}}, 2000ms), dr::DriverError);
+  EXPECT_EQ(d2.commands().size(), sent);
+  EXPECT_THROW(interlock.reset(), dr::DriverError);
+  estop.drive(false);
+  interlock.reset();
+  pos.move({{"lift", 5.0}}, 3000ms);
+  EXPECT_EQ(d2.actual_counts(), 5000);
+  EXPECT_THAT(interlock.events().front(), HasSubstr("e-stop active"));
+}
