@@ -1,5 +1,7 @@
 // Trigger pulse trains and the interlock (e-stop latch) on simulated lines; the e-stop halts real Modbus
-// drives (simulated peers over TCP) within one control cycle and refuses motion until reset.
+// drives (simulated peers over TCP) within one control cycle and refuses motion until reset; the simulated
+// scanner takes one profile per trigger pulse.
+#include <atomic>
 #include <chrono>
 #include <thread>
 
@@ -9,7 +11,9 @@
 #include "drivers/gpio.hpp"
 #include "drivers/modbus_axis.hpp"
 #include "drivers/modbus_map.hpp"
+#include "drivers/scanner.hpp"
 #include "drivers/sim/modbus_sim.hpp"
+#include "planner/config.hpp"
 
 namespace dr = scancell::drivers;
 namespace sim = scancell::drivers::sim;
@@ -103,4 +107,44 @@ TEST(Interlock, EstopHaltsEveryAxisAtOnceAndLatchesUntilReset) {
   pos.move({{"lift", 5.0}}, 3000ms);
   EXPECT_EQ(d2.actual_counts(), 5000);
   EXPECT_THAT(interlock.events().front(), HasSubstr("e-stop active"));
+}
+
+TEST(SimScanner, OneProfilePerTriggerPulseAtTheAxesPose) {
+  // A plane at z = 0; the camera 200 mm above looking down, swept 0.5 mm along its y per pulse (the sweep
+  // axis): every pulse gives a profile of N_x samples on the plane, at the sweep position of that pulse.
+  namespace sp = scancell::planner;
+  const sp::SensorModel sensor = sp::load_sensor(std::string(SCANCELL_SOURCE_DIR) + "/config/sensors/line-scan-thesis.yaml");
+  sp::TriangleMesh plane;
+  plane.vertices = {{-300, -300, 0}, {300, -300, 0}, {300, 300, 0}, {-300, 300, 0}};
+  plane.triangles = {{0, 1, 2}, {0, 2, 3}};
+  std::atomic<double> sweep{0.0};
+  auto pose = [&] {
+    Eigen::Isometry3d t = Eigen::Isometry3d::Identity();  // camera z up: boresight down, y along world Y
+    t.translation() = Eigen::Vector3d(0, sweep.load(), 200);
+    return t;
+  };
+  dr::SimScanner scanner(sensor, plane, pose);
+  // The trigger drives the scanner's input; the sweep advances between pulses.
+  std::thread sweeper([&] {
+    for (int k = 0; k < 10; ++k) {
+      scanner.set(true);
+      scanner.set(false);
+      sweep = sweep + 0.5;
+    }
+  });
+  sweeper.join();
+  for (int k = 0; k < 10; ++k) {
+    const dr::Profile p = scanner.acquire(1000ms);
+    EXPECT_EQ(p.index, static_cast<std::uint64_t>(k));
+    ASSERT_EQ(p.samples.size(), static_cast<std::size_t>(sensor.samples_x));
+    std::size_t valid = 0;
+    for (const auto& s : p.samples) {
+      if (!s.valid()) continue;
+      ++valid;
+      EXPECT_NEAR(s.true_object_mm.z(), 0.0, 1e-3);
+      EXPECT_NEAR(s.true_object_mm.y(), 0.5 * k, 1e-3);
+    }
+    EXPECT_EQ(valid, static_cast<std::size_t>(sensor.samples_x));
+  }
+  EXPECT_THROW(scanner.acquire(20ms), dr::DriverError);
 }

@@ -1,0 +1,58 @@
+#pragma once
+// The line scanner: one profile per trigger pulse. The hardware implementation belongs to the scanner
+// vendor's SDK; the simulated one ray-casts a ground-truth mesh at the pose the axes are at when the pulse
+// arrives (the verifier's virtual scanner), with the calibrated noise.
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <mutex>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include "drivers/gpio.hpp"
+#include "planner/mesh.hpp"
+#include "planner/scene.hpp"
+#include "planner/virtual_scanner.hpp"
+
+namespace scancell::drivers {
+
+struct Profile {
+  std::uint64_t index = 0;                            // trigger pulse number since start
+  std::chrono::steady_clock::time_point time;
+  Eigen::Isometry3d camera_to_object = Eigen::Isometry3d::Identity();  // where the camera was
+  std::vector<planner::RangeSample> samples;          // N_x, laser at the camera origin; invalid where no return
+};
+
+class Scanner {
+ public:
+  virtual ~Scanner() = default;
+  /// The next profile, in trigger order; DriverError(timeout) when none arrives in time.
+  virtual Profile acquire(std::chrono::milliseconds timeout) = 0;
+};
+
+/// Simulated line scanner wired to the trigger line: every rising edge captures one profile at the pose
+/// `camera_pose()` returns at that instant (the cell's kinematics at the simulated axes' positions).
+class SimScanner : public Scanner, public DigitalOutput {
+ public:
+  SimScanner(planner::SensorModel sensor, const planner::TriangleMesh& object_mm,
+             std::function<Eigen::Isometry3d()> camera_pose, std::uint64_t seed = 1);
+  void set(bool level) override;  // the trigger input
+  Profile acquire(std::chrono::milliseconds timeout) override;
+
+ private:
+  planner::SensorModel sensor_;
+  planner::OcclusionScene scene_;
+  std::function<Eigen::Isometry3d()> pose_;
+  std::uint64_t seed_;
+  bool level_ = false;
+  std::uint64_t next_ = 0;
+  std::mutex mu_;
+  std::condition_variable cv_;
+  std::deque<Profile> ready_;
+};
+
+}  // namespace scancell::drivers

@@ -1,0 +1,100 @@
+// scancell-sim: the cell's drives, served over the real protocols for the daemon, the demo and manual tests.
+//   scancell-sim modbus --tcp PORT [--rtu] [--fault F]
+// Serves one simulated Modbus drive (docs/modbus-register-map.md) on 127.0.0.1:PORT, or on a new
+// pseudo-terminal with --rtu (its path is printed). Faults can be chosen at start (--fault) or at run time by
+// writing a fault name to standard input: none, no_reply, illegal_address, busy_once, device_failure, stall,
+// drop_connection, following_error. Runs until standard input closes or SIGINT/SIGTERM.
+#include <csignal>
+#include <cstring>
+#include <iostream>
+#include <map>
+#include <string>
+#include <thread>
+
+#include <poll.h>
+#include <unistd.h>
+
+#include "drivers/sim/modbus_sim.hpp"
+
+namespace sim = scancell::drivers::sim;
+
+namespace {
+volatile std::sig_atomic_t g_stop = 0;
+void on_signal(int) { g_stop = 1; }
+
+const std::map<std::string, sim::ModbusFault> kFaults = {
+    {"none", sim::ModbusFault::none},
+    {"no_reply", sim::ModbusFault::no_reply},
+    {"illegal_address", sim::ModbusFault::illegal_address},
+    {"busy_once", sim::ModbusFault::busy_once},
+    {"device_failure", sim::ModbusFault::device_failure},
+    {"stall", sim::ModbusFault::stall},
+    {"drop_connection", sim::ModbusFault::drop_connection},
+    {"following_error", sim::ModbusFault::following_error},
+};
+
+int usage() {
+  std::cerr << "usage: scancell-sim modbus (--tcp PORT | --rtu) [--fault F]\n  faults:";
+  for (const auto& [n, f] : kFaults) std::cerr << ' ' << n;
+  std::cerr << "\n";
+  return 2;
+}
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 2 || std::strcmp(argv[1], "modbus") != 0) return usage();
+  int port = 0;
+  bool rtu = false;
+  sim::ModbusFault fault = sim::ModbusFault::none;
+  for (int i = 2; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--tcp" && i + 1 < argc) {
+      char* end = nullptr;
+      port = static_cast<int>(std::strtol(argv[++i], &end, 10));
+      if (*end || port <= 0 || port > 65535) {
+        std::cerr << "scancell-sim: --tcp: '" << argv[i] << "' is not a port\n";
+        return 2;
+      }
+    } else if (a == "--rtu") {
+      rtu = true;
+    } else if (a == "--fault" && i + 1 < argc) {
+      auto it = kFaults.find(argv[++i]);
+      if (it == kFaults.end()) {
+        std::cerr << "scancell-sim: --fault: unknown fault '" << argv[i] << "'\n";
+        return usage();
+      }
+      fault = it->second;
+    } else {
+      std::cerr << "scancell-sim: unknown option '" << a << "'\n";
+      return usage();
+    }
+  }
+  if (!rtu && port == 0) return usage();
+  std::signal(SIGINT, on_signal);
+  std::signal(SIGTERM, on_signal);
+  sim::ModbusDriveSim drive;
+  drive.inject(fault);
+  try {
+    if (rtu) std::cout << "scancell-sim: Modbus RTU on " << drive.serve_rtu() << std::endl;
+    else std::cout << "scancell-sim: Modbus TCP on 127.0.0.1:" << drive.serve_tcp(port) << std::endl;
+  } catch (const std::exception& e) {
+    std::cerr << "scancell-sim: " << e.what() << "\n";
+    return 1;
+  }
+  std::string line;
+  while (!g_stop) {
+    pollfd p{0, POLLIN, 0};
+    if (::poll(&p, 1, 100) <= 0) continue;
+    if (!std::getline(std::cin, line)) break;
+    auto it = kFaults.find(line);
+    if (it == kFaults.end()) {
+      std::cerr << "scancell-sim: unknown fault '" << line << "'\n";
+      continue;
+    }
+    drive.inject(it->second);
+    std::cout << "scancell-sim: fault " << line << std::endl;
+  }
+  std::cout << "scancell-sim: " << drive.commands().size() << " commands served, " << drive.limit_violations()
+            << " limit violations" << std::endl;
+  return drive.limit_violations() == 0 ? 0 : 1;
+}
