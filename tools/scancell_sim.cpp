@@ -3,7 +3,7 @@
 // Serves one simulated Modbus drive (docs/modbus-register-map.md) on 127.0.0.1:PORT, or on a new
 // pseudo-terminal with --rtu (its path is printed). Faults can be chosen at start (--fault) or at run time by
 // writing a fault name to standard input: none, no_reply, illegal_address, busy_once, device_failure, stall,
-// drop_connection, following_error. Runs until standard input closes or SIGINT/SIGTERM.
+// drop_connection, following_error, corrupt_once (RTU: a reply with a wrong CRC). Runs until standard input closes or SIGINT/SIGTERM.
 #include <csignal>
 #include <cstring>
 #include <iostream>
@@ -31,6 +31,7 @@ const std::map<std::string, sim::ModbusFault> kFaults = {
     {"stall", sim::ModbusFault::stall},
     {"drop_connection", sim::ModbusFault::drop_connection},
     {"following_error", sim::ModbusFault::following_error},
+    {"corrupt_once", sim::ModbusFault::corrupt_once},
 };
 
 int usage() {

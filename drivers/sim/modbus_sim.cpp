@@ -82,6 +82,7 @@ std::string ModbusDriveSim::serve_rtu() {
   modbus_set_socket(ctx, pty_master_);
   server_ctx_ = ctx;
   running_ = true;
+  rtu_ = true;
   const int fd = pty_master_;
   thread_ = std::thread([this, fd] { run_rtu(fd); });
   return name;
@@ -138,6 +139,27 @@ bool ModbusDriveSim::handle(void* ctxv, const std::uint8_t* req, int len) {
   }
   if (f == ModbusFault::device_failure) {
     modbus_reply_exception(ctx, req, MODBUS_EXCEPTION_SLAVE_OR_SERVER_FAILURE);
+    return true;
+  }
+  if (f == ModbusFault::corrupt_once && rtu_) {
+    // A well-formed reply of the right length whose CRC is wrong: the client must reject it (EMBBADCRC).
+    fault_ = ModbusFault::none;
+    const int function = req[1];
+    std::uint8_t out[MODBUS_RTU_MAX_ADU_LENGTH];
+    int n = 0;
+    out[n++] = static_cast<std::uint8_t>(unit_);
+    out[n++] = static_cast<std::uint8_t>(function);
+    if (function == 0x03) {
+      const int count = (req[4] << 8) | req[5];
+      out[n++] = static_cast<std::uint8_t>(2 * count);
+      for (int k = 0; k < 2 * count; ++k) out[n++] = 0;
+    } else {
+      for (int k = 2; k < 6; ++k) out[n++] = req[k];
+    }
+    out[n++] = 0xDE;  // not the CRC of what precedes
+    out[n++] = 0xAD;
+    (void)!::write(pty_master_, out, static_cast<std::size_t>(n));
+    ++corrupt_sent_;
     return true;
   }
   if (f == ModbusFault::busy_once) {

@@ -21,6 +21,7 @@ enum class ModbusFault {
   stall,              // moves start but never reach the target
   drop_connection,    // the connection is closed right after the next move command is answered
   following_error,    // the next move raises the drive's fault bit (following error)
+  corrupt_once,       // RTU: the next reply goes out with a wrong CRC
 };
 
 struct DriveParams {
@@ -51,6 +52,7 @@ class ModbusDriveSim {
   void inject(ModbusFault f) { fault_ = f; }
   std::vector<LoggedCommand> commands() const;
   std::size_t limit_violations() const { return violations_; }
+  int corrupt_replies_sent() const { return corrupt_sent_; }
   std::int32_t actual_counts() const;
 
  private:
@@ -69,6 +71,8 @@ class ModbusDriveSim {
   void* mapping_ = nullptr;   // modbus_mapping_t
   void* server_ctx_ = nullptr;
   int listen_fd_ = -1, pty_master_ = -1, pty_slave_ = -1;
+  bool rtu_ = false;
+  std::atomic<int> corrupt_sent_{0};
   // drive state (counts)
   double pos_ = 0.0, vel_ = 0.0;
   std::int32_t target_ = 0;

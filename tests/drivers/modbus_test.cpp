@@ -5,6 +5,7 @@
 #include <cstdlib>
 #include <functional>
 #include <cstdio>
+#include <random>
 #include <string>
 
 #include <gmock/gmock.h>
@@ -85,6 +86,21 @@ TEST(Modbus, HappyPathOverRtuOnAPseudoTerminal) {
   axis.move_to(4.0, 3000ms);
   EXPECT_DOUBLE_EQ(axis.state().position, 4.0);
   EXPECT_EQ(drive.actual_counts(), 4000);
+}
+
+TEST(Modbus, CorruptRtuReplyIsRejectedAndRetried) {
+  sim::ModbusDriveSim drive;
+  dr::ModbusConfig c = tcp_config(0);
+  c.transport = dr::ModbusConfig::Transport::rtu;
+  c.device = drive.serve_rtu();
+  c.response_timeout = 300ms;
+  dr::ModbusAxis axis(c);
+  axis.enable();
+  drive.inject(sim::ModbusFault::corrupt_once);
+  const auto s = axis.state();  // the first reply fails its CRC, the retry is clean
+  EXPECT_EQ(drive.corrupt_replies_sent(), 1);
+  EXPECT_TRUE(s.enabled);
+  EXPECT_FALSE(axis.faulted());
 }
 
 TEST(Modbus, NoReplyTimesOutAfterItsRetriesAndFaultsTheAxis) {
@@ -191,6 +207,43 @@ TEST(Modbus, SoftLimitsRefuseBeforeAnythingIsSent) {
   EXPECT_EQ(drive.actual_counts(), 99000);
   EXPECT_EQ(drive.limit_violations(), 0u);
   EXPECT_TRUE(positioner.halt_all().empty());
+}
+
+TEST(Modbus, FuzzedTargetsNeverReachTheDriveOutsideTheSoftLimits) {
+  // The drive's travel is ±1000 mm (counts ±1e6); the positioner allows ±400 mm. Random targets, many beyond
+  // either: the drive must never see one outside its travel, and the positioner never sends one outside its
+  // limits.
+  sim::DriveParams fast;  // this test is about what is sent, not how long moves take
+  fast.max_velocity_counts_s = 2e7;
+  fast.accel_counts_s2 = 2e9;
+  sim::ModbusDriveSim drive(fast);
+  dr::ModbusConfig c = tcp_config(drive.serve_tcp());
+  c.profile_velocity = 20000.0;
+  dr::Positioner pos;
+  pos.add(std::make_unique<dr::ModbusAxis>(c), {-400.0, 400.0});
+  pos.axis("lift").enable();
+  pos.axis("lift").home(2000ms);
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> u(-3000.0, 3000.0);
+  int refused = 0, moved = 0;
+  for (int k = 0; k < 60; ++k) {
+    const double t = u(rng);
+    try {
+      pos.move({{"lift", t}}, 3000ms);
+      ++moved;
+    } catch (const dr::DriverError& e) {
+      EXPECT_EQ(e.kind, dr::DriverError::Kind::refused) << e.what();
+      ++refused;
+    }
+  }
+  EXPECT_GT(refused, 40);
+  EXPECT_GT(moved, 0);
+  EXPECT_EQ(drive.limit_violations(), 0u);
+  for (const auto& cmd : drive.commands())
+    if (cmd.command == dr::modbus_map::kMove) {
+      EXPECT_GE(cmd.target, -400000);
+      EXPECT_LE(cmd.target, 400000);
+    }
 }
 
 TEST(Modbus, MbpollReadsTheDocumentedMap) {
