@@ -1,0 +1,100 @@
+#include "drivers/config.hpp"
+
+#include "planner/yaml_section.hpp"
+
+namespace scancell::drivers {
+namespace {
+
+using planner::Section;
+
+std::chrono::milliseconds ms(Section& s, const std::string& key, std::chrono::milliseconds fallback) {
+  const double v = s.get_or<double>(key, static_cast<double>(fallback.count()));
+  if (!(v > 0.0 && v <= 600000.0)) s.fail(s.key_path(key), "must be in (0, 600000] ms");
+  return std::chrono::milliseconds(static_cast<long>(v));
+}
+
+/// Counts per unit and profile velocity: per mm for linear axes, per rad for rotary ones; exactly one.
+void scaling(Section& s, double& counts, double& velocity) {
+  const bool mm = s.has("counts_per_mm"), rad = s.has("counts_per_rad");
+  if (mm == rad) s.fail(s.key_path("counts_per_mm"), "give counts_per_mm (linear) or counts_per_rad (rotary), one of them");
+  counts = s.positive(mm ? "counts_per_mm" : "counts_per_rad");
+  velocity = s.positive(mm ? "profile_velocity_mm_s" : "profile_velocity_rad_s");
+}
+
+LineConfig line(Section s) {
+  LineConfig l;
+  l.chip = s.get<std::string>("chip");
+  const int off = s.get<int>("offset");
+  if (off < 0 || off > 1023) s.fail(s.key_path("offset"), "must be in [0, 1023]");
+  l.offset = static_cast<unsigned>(off);
+  l.active_high = s.get_or<bool>("active_high", true);
+  s.finish();
+  return l;
+}
+
+}  // namespace
+
+DriverSetup load_driver_setup(const std::filesystem::path& file) {
+  YAML::Node root;
+  Section y = planner::open_root(file, root);
+  DriverSetup d;
+  Section axes = y.section("axes");
+  for (const auto& name : axes.keys()) {
+    Section a = axes.section(name);
+    const std::string kind = a.get<std::string>("driver");
+    if (kind == "modbus_tcp" || kind == "modbus_rtu") {
+      ModbusConfig c;
+      c.name = name;
+      if (kind == "modbus_tcp") {
+        c.transport = ModbusConfig::Transport::tcp;
+        c.host = a.get<std::string>("host");
+        c.port = a.get<int>("port");
+        if (c.port < 1 || c.port > 65535) a.fail(a.key_path("port"), "must be in [1, 65535]");
+      } else {
+        c.transport = ModbusConfig::Transport::rtu;
+        c.device = a.get<std::string>("device");
+        c.baud = a.get<int>("baud");
+        const std::string parity = a.get_or<std::string>("parity", "N");
+        if (parity != "N" && parity != "E" && parity != "O") a.fail(a.key_path("parity"), "must be N, E or O");
+        c.parity = parity[0];
+      }
+      c.unit_id = a.get<int>("unit_id");
+      if (c.unit_id < 1 || c.unit_id > 247) a.fail(a.key_path("unit_id"), "must be in [1, 247]");
+      scaling(a, c.counts_per_unit, c.profile_velocity);
+      c.response_timeout = ms(a, "response_timeout_ms", c.response_timeout);
+      c.retries = a.get_or<int>("retries", c.retries);
+      if (c.retries < 0 || c.retries > 20) a.fail(a.key_path("retries"), "must be in [0, 20]");
+      c.reconnect_backoff = ms(a, "reconnect_backoff_ms", c.reconnect_backoff);
+      c.reconnect_attempts = a.get_or<int>("reconnect_attempts", c.reconnect_attempts);
+      a.finish();
+      d.axes[name] = c;
+    } else if (kind == "canopen") {
+      CanOpenAxisConfig c;
+      c.interface = a.get<std::string>("interface");
+      c.axis.name = name;
+      c.axis.node_id = a.get<int>("node_id");
+      if (c.axis.node_id < 1 || c.axis.node_id > 127) a.fail(a.key_path("node_id"), "must be in [1, 127]");
+      scaling(a, c.axis.counts_per_unit, c.axis.profile_velocity);
+      c.axis.sdo_timeout = ms(a, "sdo_timeout_ms", c.axis.sdo_timeout);
+      c.axis.heartbeat_timeout = ms(a, "heartbeat_timeout_ms", c.axis.heartbeat_timeout);
+      a.finish();
+      d.axes[name] = c;
+    } else if (kind == "sim") {
+      a.finish();
+      d.axes[name] = SimAxisConfig{};
+    } else {
+      a.fail(a.key_path("driver"), "must be modbus_tcp, modbus_rtu, canopen or sim, got '" + kind + "'");
+    }
+  }
+  if (y.has("trigger")) d.trigger = line(y.section("trigger"));
+  if (y.has("interlocks")) {
+    Section i = y.section("interlocks");
+    if (i.has("estop")) d.estop = line(i.section("estop"));
+    if (i.has("door")) d.door = line(i.section("door"));
+    i.finish();
+  }
+  y.finish();
+  return d;
+}
+
+}  // namespace scancell::drivers

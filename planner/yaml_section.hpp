@@ -1,0 +1,143 @@
+#pragma once
+// A YAML mapping that knows its file and key path and which keys were read, so that every config loader
+// refuses unknown keys and names "file: key.path: why" for anything wrong. Shared by the planner's and the
+// drivers' configuration.
+#include <cmath>
+#include <filesystem>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <yaml-cpp/yaml.h>
+
+#include "planner/errors.hpp"
+
+namespace scancell::planner {
+
+/// A YAML mapping that knows its key path and which keys were read, so unknown keys can be refused.
+class Section {
+ public:
+  Section(YAML::Node node, std::string file, std::string path) : node_(std::move(node)), file_(std::move(file)), path_(std::move(path)) {
+    if (!node_.IsMap()) fail(path_.empty() ? "<root>" : path_, "must be a mapping");
+  }
+
+  [[noreturn]] void fail(const std::string& key, const std::string& why) const {
+    throw ConfigError(file_ + ": " + key + ": " + why);
+  }
+  std::string key_path(const std::string& key) const { return path_.empty() ? key : path_ + "." + key; }
+
+  bool has(const std::string& key) const { return static_cast<bool>(node_[key]); }
+
+  template <class T>
+  T get(const std::string& key) {
+    used_.insert(key);
+    const YAML::Node n = node_[key];
+    if (!n) fail(key_path(key), "missing");
+    return convert<T>(n, key);
+  }
+  template <class T>
+  T get_or(const std::string& key, T fallback) {
+    return has(key) ? get<T>(key) : fallback;
+  }
+  Section section(const std::string& key) {
+    used_.insert(key);
+    const YAML::Node n = node_[key];
+    if (!n) fail(key_path(key), "missing");
+    return Section(n, file_, key_path(key));
+  }
+  double positive(const std::string& key) {
+    const double v = get<double>(key);
+    if (!(v > 0.0)) fail(key_path(key), "must be > 0, got " + std::to_string(v));
+    return v;
+  }
+  Eigen::Vector3d vec3(const std::string& key) {
+    used_.insert(key);
+    const YAML::Node n = node_[key];
+    if (!n) fail(key_path(key), "missing");
+    if (!n.IsSequence() || n.size() != 3) fail(key_path(key), "must be a list of 3 numbers");
+    Eigen::Vector3d v;
+    for (int k = 0; k < 3; ++k) {
+      try {
+        v[k] = n[k].as<double>();
+      } catch (const YAML::Exception&) {
+        fail(key_path(key), "element " + std::to_string(k) + " is not a number");
+      }
+      if (!std::isfinite(v[k])) fail(key_path(key), "element " + std::to_string(k) + " must be finite");
+    }
+    return v;
+  }
+  std::vector<std::string> keys() const {
+    std::vector<std::string> out;
+    for (const auto& kv : node_) out.push_back(kv.first.as<std::string>());
+    return out;
+  }
+  YAML::Node raw(const std::string& key) {
+    used_.insert(key);
+    return node_[key];
+  }
+  const std::string& file() const { return file_; }
+  double non_negative(const std::string& key, double fallback) {
+    const double v = get_or<double>(key, fallback);
+    if (!(v >= 0.0)) fail(key_path(key), "must be >= 0, got " + std::to_string(v));
+    return v;
+  }
+  /// Refuses keys nobody asked for: a typo must not silently fall back to a default.
+  void finish() const {
+    for (const auto& kv : node_) {
+      const std::string k = kv.first.as<std::string>();
+      if (!used_.count(k)) fail(key_path(k), "unknown key");
+    }
+  }
+
+ private:
+  template <class T>
+  T convert(const YAML::Node& n, const std::string& key) const {
+    try {
+      if constexpr (std::is_floating_point_v<T>) {
+        const T v = n.as<T>();
+        if (!std::isfinite(v)) fail(key_path(key), "must be a finite number");
+        return v;
+      } else {
+        return n.as<T>();
+      }
+    } catch (const YAML::Exception&) {
+      std::ostringstream os;
+      os << "cannot read '" << (n.IsScalar() ? n.Scalar() : std::string("<non-scalar>")) << "' as "
+         << (std::is_floating_point_v<T> ? "a number" : std::is_integral_v<T> ? "an integer" : "a string");
+      fail(key_path(key), os.str());
+    }
+  }
+
+  YAML::Node node_;
+  std::string file_, path_;
+  std::set<std::string> used_;
+};
+
+inline Section open_root(const std::filesystem::path& file, YAML::Node& holder) {
+  try {
+    holder = YAML::LoadFile(file.string());
+  } catch (const YAML::BadFile&) {
+    throw ConfigError(file.string() + ": cannot open file");
+  } catch (const YAML::Exception& e) {
+    throw ConfigError(file.string() + ": invalid YAML at line " + std::to_string(e.mark.line + 1) + ", column " +
+                      std::to_string(e.mark.column + 1) + ": " + e.msg);
+  }
+  if (!holder || holder.IsNull()) throw ConfigError(file.string() + ": file is empty");
+  return Section(holder, file.string(), "");
+}
+
+inline Section parse_root(const std::string& text, const std::string& where, YAML::Node& holder) {
+  try {
+    holder = YAML::Load(text);
+  } catch (const YAML::Exception& e) {
+    throw ConfigError(where + ": invalid YAML/JSON at line " + std::to_string(e.mark.line + 1) + ", column " +
+                      std::to_string(e.mark.column + 1) + ": " + e.msg);
+  }
+  if (!holder || holder.IsNull()) throw ConfigError(where + ": empty");
+  return Section(holder, where, "");
+}
+
+
+}  // namespace scancell::planner
