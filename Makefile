@@ -16,7 +16,7 @@ build: deps
 	@$(CMAKE) -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo > $(BUILD).configure.log 2>&1 || (cat $(BUILD).configure.log; exit 1)
 	@$(CMAKE) --build $(BUILD) -j$(JOBS)
 
-# All tests in the optimised build, then the planner tests again under ASan+UBSan (-O1 keeps it quick;
+# All tests in the optimised build, then the planner and driver tests again under ASan+UBSan (-O1 keeps it quick;
 # Debug keeps Eigen's bounds assertions).
 test: build
 	ctest --test-dir $(BUILD) --output-on-failure -j$(JOBS)
@@ -24,9 +24,9 @@ test: build
 
 test-asan: deps
 	@$(CMAKE) -S . -B $(ASAN_BUILD) -DCMAKE_BUILD_TYPE=Debug "-DCMAKE_CXX_FLAGS_DEBUG=-O1 -g" -DSCANCELL_SANITIZE=ON -DSCANCELL_BUILD_BENCH=OFF > $(ASAN_BUILD).configure.log 2>&1 || (cat $(ASAN_BUILD).configure.log; exit 1)
-	@$(CMAKE) --build $(ASAN_BUILD) -j$(JOBS) --target planner_tests
+	@$(CMAKE) --build $(ASAN_BUILD) -j$(JOBS) --target planner_tests driver_tests
 	LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp UBSAN_OPTIONS=print_stacktrace=1 \
-	  ctest --test-dir $(ASAN_BUILD) --output-on-failure -j$(JOBS) -L planner
+	  ctest --test-dir $(ASAN_BUILD) --output-on-failure -j$(JOBS) -L 'planner|drivers'
 
 # Until the daemon exists: plan the bundled example object, then execute the plan with the virtual scanner
 # on the fine model (verified measurability, coverage mesh and projection image).
