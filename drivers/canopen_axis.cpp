@@ -10,6 +10,7 @@
 #include <poll.h>
 #include <sys/ioctl.h>
 #include <sys/socket.h>
+#include <sys/un.h>
 #include <unistd.h>
 
 namespace scancell::drivers {
@@ -75,6 +76,28 @@ int CanLink::open_socketcan(const std::string& interface) {
     throw DriverError(DriverError::Kind::connection, interface, "bind", std::strerror(e));
   }
   return fd;
+}
+
+int CanLink::open_unix(const std::string& path) {
+  const int fd = ::socket(AF_UNIX, SOCK_SEQPACKET, 0);
+  if (fd < 0) throw DriverError(DriverError::Kind::connection, path, "socket(AF_UNIX)", std::strerror(errno));
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  if (path.size() >= sizeof addr.sun_path) {
+    ::close(fd);
+    throw DriverError(DriverError::Kind::connection, path, "connect", "path too long for a Unix socket");
+  }
+  std::memcpy(addr.sun_path, path.c_str(), path.size() + 1);
+  if (::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) < 0) {
+    const int e = errno;
+    ::close(fd);
+    throw DriverError(DriverError::Kind::connection, path, "connect", std::strerror(e));
+  }
+  return fd;
+}
+
+int CanLink::open(const std::string& interface) {
+  return interface.rfind("unix:", 0) == 0 ? open_unix(interface.substr(5)) : open_socketcan(interface);
 }
 
 void CanLink::send(const can_frame& f) {

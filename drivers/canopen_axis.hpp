@@ -26,6 +26,11 @@ class CanLink {
   CanLink& operator=(const CanLink&) = delete;
   /// Raw SocketCAN socket bound to an interface (can0 ...): the production path.
   static int open_socketcan(const std::string& interface);
+  /// A SOCK_SEQPACKET Unix socket carrying struct can_frame records (scancell-sim's simulated bus, for the
+  /// demo where the kernel has no CAN).
+  static int open_unix(const std::string& path);
+  /// "unix:PATH" opens open_unix(PATH), anything else open_socketcan(name).
+  static int open(const std::string& interface);
   void send(const can_frame& f);
   /// Next frame within the timeout; false on timeout. Throws DriverError(connection) when the link is gone.
   bool receive(can_frame& f, std::chrono::milliseconds timeout);

@@ -1,19 +1,28 @@
 // scancell-sim: the cell's drives, served over the real protocols for the daemon, the demo and manual tests.
-//   scancell-sim modbus --tcp PORT [--rtu] [--fault F]
+//   scancell-sim modbus (--tcp PORT | --rtu) [--fault F]
+//   scancell-sim can --unix PATH [--node N]
 // Serves one simulated Modbus drive (docs/modbus-register-map.md) on 127.0.0.1:PORT, or on a new
 // pseudo-terminal with --rtu (its path is printed). Faults can be chosen at start (--fault) or at run time by
 // writing a fault name to standard input: none, no_reply, illegal_address, busy_once, device_failure, stall,
-// drop_connection, following_error, corrupt_once (RTU: a reply with a wrong CRC). Runs until standard input closes or SIGINT/SIGTERM.
+// drop_connection, following_error, corrupt_once (RTU: a reply with a wrong CRC).
+// `can` serves one simulated CiA 402 drive (node N, default 1) on a SOCK_SEQPACKET Unix socket at PATH carrying
+// struct can_frame records (the drivers' CanLink::open("unix:PATH")); faults from standard input: none,
+// sdo_abort_once, missing_heartbeat, drive_fault, following_error, bus_off. Runs until standard input closes
+// or SIGINT/SIGTERM.
 #include <csignal>
 #include <cstring>
 #include <iostream>
 #include <map>
+#include <memory>
 #include <string>
 #include <thread>
 
 #include <poll.h>
+#include <sys/socket.h>
+#include <sys/un.h>
 #include <unistd.h>
 
+#include "drivers/sim/cia402_sim.hpp"
 #include "drivers/sim/modbus_sim.hpp"
 
 namespace sim = scancell::drivers::sim;
@@ -34,7 +43,17 @@ const std::map<std::string, sim::ModbusFault> kFaults = {
     {"corrupt_once", sim::ModbusFault::corrupt_once},
 };
 
+const std::map<std::string, sim::CanFault> kCanFaults = {
+    {"none", sim::CanFault::none},
+    {"sdo_abort_once", sim::CanFault::sdo_abort_once},
+    {"missing_heartbeat", sim::CanFault::missing_heartbeat},
+    {"drive_fault", sim::CanFault::drive_fault},
+    {"following_error", sim::CanFault::following_error},
+    {"bus_off", sim::CanFault::bus_off},
+};
+
 int usage() {
+  std::cerr << "usage: scancell-sim can --unix PATH [--node N]\n";
   std::cerr << "usage: scancell-sim modbus (--tcp PORT | --rtu) [--fault F]\n  faults:";
   for (const auto& [n, f] : kFaults) std::cerr << ' ' << n;
   std::cerr << "\n";
@@ -42,7 +61,61 @@ int usage() {
 }
 }  // namespace
 
+int serve_can(int argc, char** argv) {
+  std::string path;
+  int node = 1;
+  for (int i = 2; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--unix" && i + 1 < argc) path = argv[++i];
+    else if (a == "--node" && i + 1 < argc) node = std::atoi(argv[++i]);
+    else return usage();
+  }
+  if (path.empty() || node < 1 || node > 127) return usage();
+  const int lfd = ::socket(AF_UNIX, SOCK_SEQPACKET, 0);
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  if (lfd < 0 || path.size() >= sizeof addr.sun_path) {
+    std::cerr << "scancell-sim: cannot make a Unix socket at " << path << "\n";
+    return 1;
+  }
+  std::memcpy(addr.sun_path, path.c_str(), path.size() + 1);
+  ::unlink(path.c_str());
+  if (::bind(lfd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) < 0 || ::listen(lfd, 1) < 0) {
+    std::cerr << "scancell-sim: " << path << ": " << std::strerror(errno) << "\n";
+    return 1;
+  }
+  std::signal(SIGINT, on_signal);
+  std::signal(SIGTERM, on_signal);
+  std::cout << "scancell-sim: CiA 402 drive node " << node << " on unix:" << path << std::endl;
+  std::unique_ptr<sim::Cia402DriveSim> drive;
+  std::string line;
+  while (!g_stop) {
+    pollfd p[2] = {{lfd, POLLIN, 0}, {0, POLLIN, 0}};
+    if (::poll(p, 2, 100) <= 0) continue;
+    if (p[0].revents & POLLIN) {
+      const int c = ::accept(lfd, nullptr, nullptr);
+      if (c >= 0) drive = std::make_unique<sim::Cia402DriveSim>(c, node);  // one client: a new one replaces it
+    }
+    if (p[1].revents & (POLLIN | POLLHUP)) {
+      if (!std::getline(std::cin, line)) break;
+      auto it = kCanFaults.find(line);
+      if (it == kCanFaults.end() || !drive) {
+        std::cerr << "scancell-sim: " << (drive ? "unknown fault '" + line + "'" : std::string("no client yet")) << "\n";
+        continue;
+      }
+      drive->inject(it->second);
+      std::cout << "scancell-sim: fault " << line << std::endl;
+    }
+  }
+  const std::size_t violations = drive ? drive->limit_violations() : 0;
+  drive.reset();
+  ::close(lfd);
+  ::unlink(path.c_str());
+  return violations == 0 ? 0 : 1;
+}
+
 int main(int argc, char** argv) {
+  if (argc >= 2 && std::strcmp(argv[1], "can") == 0) return serve_can(argc, argv);
   if (argc < 2 || std::strcmp(argv[1], "modbus") != 0) return usage();
   int port = 0;
   bool rtu = false;

@@ -4,6 +4,8 @@
 #include <functional>
 #include <thread>
 
+#include <unistd.h>
+
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <sys/socket.h>
@@ -144,4 +146,29 @@ TEST(CanOpen, SoftLimitsAreCheckedBeforeAnyFrameLeaves) {
   pos.move({{"tilt", 1.0}}, 3000ms);
   EXPECT_EQ(drive.actual_counts(), 10000);
   EXPECT_EQ(drive.limit_violations(), 0u);
+}
+
+TEST(CanOpen, ScancellSimServesADriveOnAUnixSocket) {
+  // The demo path: scancell-sim can --unix PATH in another process, the driver opening "unix:PATH".
+  const std::string path = "/tmp/scancell-can-test-" + std::to_string(::getpid());
+  const std::string cmd = std::string("sleep 5 | ") + SCANCELL_SIM + " can --unix " + path + " --node 4 > /dev/null 2>&1 &";
+  ASSERT_EQ(std::system(cmd.c_str()), 0);
+  int fd = -1;
+  for (int k = 0; k < 100 && fd < 0; ++k) {
+    try {
+      fd = dr::CanLink::open("unix:" + path);
+    } catch (const dr::DriverError&) {
+      std::this_thread::sleep_for(20ms);
+    }
+  }
+  ASSERT_GE(fd, 0) << "scancell-sim did not come up";
+  dr::CanOpenConfig c;
+  c.name = "turntable";
+  c.node_id = 4;
+  c.counts_per_unit = 10000.0;
+  dr::CanOpenAxis axis(c, fd);
+  axis.enable();
+  axis.home(2000ms);
+  axis.move_to(0.5, 3000ms);
+  EXPECT_DOUBLE_EQ(axis.state().position, 0.5);
 }
