@@ -55,8 +55,8 @@ class Positioner {
  public:
   void add(std::unique_ptr<Axis> axis, SoftLimits limits);
   Axis& axis(const std::string& name);
-  /// Moves the named axes one after another (each to in-position); a target outside its limits refuses the
-  /// whole move before anything is sent, naming the axis and the limit.
+  /// Moves the named axes together, each to in-position; a target outside its limits refuses the whole move
+  /// before anything is sent, naming the axis and the limit; an axis failing halts all of them.
   void move(const std::map<std::string, double>& targets, std::chrono::milliseconds timeout);
   /// Quick-stops every axis (e-stop path); errors of individual axes are collected, not thrown midway.
   std::vector<std::string> halt_all();

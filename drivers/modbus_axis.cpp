@@ -3,6 +3,7 @@
 #include <cerrno>
 #include <cmath>
 #include <cstring>
+#include <exception>
 #include <thread>
 
 #include <modbus/modbus.h>
@@ -272,7 +273,29 @@ void Positioner::move(const std::map<std::string, double>& targets, std::chrono:
       throw DriverError(DriverError::Kind::refused, n, "soft limit",
                         "target " + std::to_string(t) + " outside [" + std::to_string(l.min) + ", " + std::to_string(l.max) + "]");
   }
-  for (const auto& [n, t] : targets) axes_.at(n).axis->move_to(t, timeout);
+  // All axes move at once (the planner's move times assume it): one thread per axis, each with its own
+  // transaction lock. If any axis fails, every axis is halted and the first error is reported.
+  std::vector<std::thread> movers;
+  std::vector<std::exception_ptr> errors(targets.size());
+  std::size_t k = 0;
+  for (const auto& [n, t] : targets) {
+    Axis* a = axes_.at(n).axis.get();
+    const double target = t;
+    std::exception_ptr* slot = &errors[k++];
+    movers.emplace_back([a, target, timeout, slot] {
+      try {
+        a->move_to(target, timeout);
+      } catch (...) {
+        *slot = std::current_exception();
+      }
+    });
+  }
+  for (auto& m : movers) m.join();
+  for (const auto& e : errors)
+    if (e) {
+      halt_all();
+      std::rethrow_exception(e);
+    }
 }
 
 std::vector<std::string> Positioner::halt_all() {

@@ -104,8 +104,11 @@ void ModbusDriveSim::step(double dt) {
     const double d = target_ - pos_;
     const double dir = d >= 0 ? 1.0 : -1.0;
     const double brake = vel_ * vel_ / (2.0 * p_.accel_counts_s2);
+    // The commanded profile velocity (registers 6-7), capped by the drive's own maximum.
+    const double profile = mm::get_i32(map_of(mapping_)->tab_registers, mm::kVelocityHi);
+    const double vmax = profile > 0.0 ? std::min(profile, p_.max_velocity_counts_s) : p_.max_velocity_counts_s;
     if (std::abs(d) <= brake + 1e-9) vel_ = std::max(0.0, vel_ - p_.accel_counts_s2 * dt);
-    else vel_ = std::min(p_.max_velocity_counts_s, vel_ + p_.accel_counts_s2 * dt);
+    else vel_ = std::min(vmax, vel_ + p_.accel_counts_s2 * dt);
     double stepc = vel_ * dt;
     if (stepc >= std::abs(d) || (vel_ == 0.0 && std::abs(d) < 1.0)) {
       pos_ = target_;

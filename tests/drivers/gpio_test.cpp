@@ -110,6 +110,20 @@ TEST(Interlock, EstopHaltsEveryAxisAtOnceAndLatchesUntilReset) {
   interlock.reset();
   pos.move({{"lift", 5.0}}, 3000ms);
   EXPECT_EQ(d2.actual_counts(), 5000);
+  // Both axes move together: at some instant both drives are between their start and their target.
+  pos.axis("reach").reset_fault();
+  const std::int32_t r0 = d1.actual_counts(), l0 = d2.actual_counts();
+  std::thread both([&] { pos.move({{"reach", 25.0}, {"lift", 25.0}}, 5000ms); });
+  bool together = false;
+  for (int k = 0; k < 2000 && !together; ++k) {
+    const std::int32_t r = d1.actual_counts(), l = d2.actual_counts();
+    together = r > r0 && r < 25000 && l > l0 && l < 25000;
+    std::this_thread::sleep_for(1ms);
+  }
+  both.join();
+  EXPECT_TRUE(together);
+  EXPECT_EQ(d1.actual_counts(), 25000);
+  EXPECT_EQ(d2.actual_counts(), 25000);
   EXPECT_THAT(interlock.events().front(), HasSubstr("e-stop active"));
 }
 
