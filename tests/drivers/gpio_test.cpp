@@ -113,7 +113,14 @@ TEST(Interlock, EstopHaltsEveryAxisAtOnceAndLatchesUntilReset) {
   // Both axes move together: at some instant both drives are between their start and their target.
   pos.axis("reach").reset_fault();
   const std::int32_t r0 = d1.actual_counts(), l0 = d2.actual_counts();
-  std::thread both([&] { pos.move({{"reach", 25.0}, {"lift", 25.0}}, 5000ms); });
+  std::exception_ptr both_error;
+  std::thread both([&] {
+    try {
+      pos.move({{"reach", 25.0}, {"lift", 25.0}}, 5000ms);
+    } catch (...) {
+      both_error = std::current_exception();
+    }
+  });
   bool together = false;
   for (int k = 0; k < 2000 && !together; ++k) {
     const std::int32_t r = d1.actual_counts(), l = d2.actual_counts();
@@ -121,6 +128,7 @@ TEST(Interlock, EstopHaltsEveryAxisAtOnceAndLatchesUntilReset) {
     std::this_thread::sleep_for(1ms);
   }
   both.join();
+  EXPECT_FALSE(both_error);
   EXPECT_TRUE(together);
   EXPECT_EQ(d1.actual_counts(), 25000);
   EXPECT_EQ(d2.actual_counts(), 25000);
