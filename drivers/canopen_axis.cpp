@@ -151,14 +151,13 @@ void CanOpenAxis::nmt(std::uint8_t command) {
   link_.send(f);
 }
 
-void CanOpenAxis::sdo_write(std::uint16_t index, std::uint8_t sub, std::uint32_t value, int bytes) {
-  std::lock_guard<std::mutex> lock(io_);  // one SDO transaction at a time (an e-stop halt may come from another thread)
-  const std::string where = object_name(index, sub);
+can_frame CanOpenAxis::sdo_transfer(std::uint8_t command, std::uint16_t index, std::uint8_t sub, std::uint32_t value,
+                                    const std::string& where) {
   for (int attempt = 0;; ++attempt) {
     can_frame f{};
     f.can_id = static_cast<canid_t>(0x600 + cfg_.node_id);
     f.can_dlc = 8;
-    f.data[0] = static_cast<std::uint8_t>(0x23 | ((4 - bytes) << 2));  // expedited download, size indicated
+    f.data[0] = command;
     f.data[1] = index & 0xFF;
     f.data[2] = index >> 8;
     f.data[3] = sub;
@@ -168,52 +167,36 @@ void CanOpenAxis::sdo_write(std::uint16_t index, std::uint8_t sub, std::uint32_t
     can_frame r{};
     while (Clock::now() < deadline) {
       if (!link_.receive(r, std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()) + std::chrono::milliseconds(1))) break;
-      absorb(r);
+      absorb(r);  // heartbeats and other traffic arrive in between
       if (r.can_id != static_cast<canid_t>(0x580 + cfg_.node_id)) continue;
       if (r.data[0] == 0x80) {
         std::uint32_t code = 0;
         for (int k = 0; k < 4; ++k) code |= static_cast<std::uint32_t>(r.data[4 + k]) << (8 * k);
         fail(DriverError::Kind::exception, where, "SDO abort: " + sdo_abort_text(code));
       }
-      if (r.data[0] == 0x60) return;
-      fail(DriverError::Kind::protocol, where, "unexpected SDO reply " + hex(r.data[0], 2));
+      return r;
     }
-    check_heartbeat("SDO write");
+    check_heartbeat("SDO " + where);
     if (attempt >= cfg_.sdo_retries) fail(DriverError::Kind::timeout, where, "no SDO reply");
   }
+}
+
+void CanOpenAxis::sdo_write(std::uint16_t index, std::uint8_t sub, std::uint32_t value, int bytes) {
+  std::lock_guard<std::mutex> lock(io_);  // one SDO transaction at a time (an e-stop halt may come from another thread)
+  const std::string where = object_name(index, sub);
+  // Expedited download with the size indicated: 0x23 (4 bytes), 0x27 (3), 0x2B (2), 0x2F (1).
+  const can_frame r = sdo_transfer(static_cast<std::uint8_t>(0x23 | ((4 - bytes) << 2)), index, sub, value, where);
+  if (r.data[0] != 0x60) fail(DriverError::Kind::protocol, where, "unexpected SDO reply " + hex(r.data[0], 2));
 }
 
 std::uint32_t CanOpenAxis::sdo_read(std::uint16_t index, std::uint8_t sub) {
   std::lock_guard<std::mutex> lock(io_);
   const std::string where = object_name(index, sub);
-  for (int attempt = 0;; ++attempt) {
-    can_frame f{};
-    f.can_id = static_cast<canid_t>(0x600 + cfg_.node_id);
-    f.can_dlc = 8;
-    f.data[0] = 0x40;
-    f.data[1] = index & 0xFF;
-    f.data[2] = index >> 8;
-    f.data[3] = sub;
-    link_.send(f);
-    const auto deadline = Clock::now() + cfg_.sdo_timeout;
-    can_frame r{};
-    while (Clock::now() < deadline) {
-      if (!link_.receive(r, std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()) + std::chrono::milliseconds(1))) break;
-      absorb(r);
-      if (r.can_id != static_cast<canid_t>(0x580 + cfg_.node_id)) continue;
-      if (r.data[0] == 0x80) {
-        std::uint32_t code = 0;
-        for (int k = 0; k < 4; ++k) code |= static_cast<std::uint32_t>(r.data[4 + k]) << (8 * k);
-        fail(DriverError::Kind::exception, where, "SDO abort: " + sdo_abort_text(code));
-      }
-      if ((r.data[0] & 0xE3) != 0x43) fail(DriverError::Kind::protocol, where, "unexpected SDO reply " + hex(r.data[0], 2));
-      std::uint32_t v = 0;
-      for (int k = 0; k < 4; ++k) v |= static_cast<std::uint32_t>(r.data[4 + k]) << (8 * k);
-      return v;
-    }
-    check_heartbeat("SDO read");
-    if (attempt >= cfg_.sdo_retries) fail(DriverError::Kind::timeout, where, "no SDO reply");
-  }
+  const can_frame r = sdo_transfer(0x40, index, sub, 0, where);  // expedited upload request
+  if ((r.data[0] & 0xE3) != 0x43) fail(DriverError::Kind::protocol, where, "unexpected SDO reply " + hex(r.data[0], 2));
+  std::uint32_t v = 0;
+  for (int k = 0; k < 4; ++k) v |= static_cast<std::uint32_t>(r.data[4 + k]) << (8 * k);
+  return v;
 }
 
 std::uint16_t CanOpenAxis::statusword() { return static_cast<std::uint16_t>(sdo_read(kStatusword, 0)); }

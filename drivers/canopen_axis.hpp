@@ -76,6 +76,9 @@ class CanOpenAxis : public Axis {
   [[noreturn]] void fail(DriverError::Kind kind, const std::string& where, const std::string& cause);
   void refuse_if_faulted(const std::string& what) const;
   void nmt(std::uint8_t command);
+  /// One SDO request/response (retries, heartbeat check, aborts decoded); the reply frame.
+  can_frame sdo_transfer(std::uint8_t command, std::uint16_t index, std::uint8_t sub, std::uint32_t value,
+                         const std::string& where);
   void absorb(const can_frame& f);  // heartbeat and other unsolicited frames
   void check_heartbeat(const std::string& what);
   std::uint16_t statusword();
