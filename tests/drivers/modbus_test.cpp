@@ -132,6 +132,21 @@ TEST(Modbus, ExceptionsAreTypedAndNameTheRegister) {
     EXPECT_THAT(e.cause, HasSubstr("Illegal data address"));
   }
   EXPECT_TRUE(drive.commands().empty());
+  // A device failure is not transient either: typed, the axis faults, nothing more is commanded.
+  sim::ModbusDriveSim other;
+  dr::ModbusAxis second(tcp_config(other.serve_tcp()));
+  other.inject(sim::ModbusFault::device_failure);
+  try {
+    second.enable();
+    FAIL() << "enable succeeded";
+  } catch (const dr::DriverError& e) {
+    EXPECT_EQ(e.kind, dr::DriverError::Kind::exception);
+    EXPECT_THAT(e.cause, HasSubstr("Slave device or server failure"));
+  }
+  EXPECT_TRUE(second.faulted());
+  other.inject(sim::ModbusFault::none);
+  EXPECT_EQ(kind_of([&] { second.move_to(1.0, 500ms); }), dr::DriverError::Kind::refused);
+  EXPECT_TRUE(other.commands().empty());
 }
 
 TEST(Modbus, SlaveBusyIsRetriedTransparently) {
