@@ -8,7 +8,7 @@ PKGS=(
   libyaml-cpp-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev libpng-dev
   coinor-libcbc-dev liborocos-kdl-dev libfcl-dev
-  libmodbus-dev mbpoll libgpiod-dev
+  libmodbus-dev mbpoll libgpiod-dev libsqlite3-dev zlib1g-dev
 )
 missing=()
 for p in "${PKGS[@]}"; do

@@ -1,0 +1,89 @@
+#pragma once
+// The daemon's crash-safe journal (SQLite, WAL, synchronous=FULL): jobs, plans, views, scans, events. Each
+// transition is committed before the action it starts; scan data go to files in the data directory (temp
+// file, fsync, rename, fsync of the directory) and are referenced with their size and CRC-32 only once the
+// file is durable. After a kill -9 at any moment, a reopened journal resumes every job at its first view
+// without a stored scan: no stored scan is lost, none is repeated, no partial file is referenced.
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+struct sqlite3;
+
+namespace scancell::daemon {
+
+enum class JobState { queued, planning, executing, verifying, replanning, done, stalled, aborted, faulted };
+const char* to_string(JobState s);
+JobState job_state_from(const std::string& s);  // throws std::invalid_argument
+bool finished(JobState s);                     // done, stalled, aborted
+
+struct JobRecord {
+  std::int64_t id = 0;
+  JobState state = JobState::queued;
+  std::string mesh_path, request_json, cause;
+};
+
+struct ViewRecord {
+  std::int64_t plan = 0;
+  int index = 0;
+  std::string pose_json;
+  bool stored = false;
+};
+
+struct ScanRecord {
+  std::int64_t plan = 0;
+  int view = 0;
+  std::string file;  // relative to the data directory
+  std::uint64_t bytes = 0;
+  std::uint32_t crc32 = 0;
+};
+
+/// Journal errors name the database file and the statement.
+struct JournalError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+class Journal {
+ public:
+  /// Opens (or creates) `dir`/journal.sqlite and `dir`/scans/; removes temp files a crash left behind.
+  explicit Journal(const std::filesystem::path& dir);
+  ~Journal();
+  Journal(const Journal&) = delete;
+  Journal& operator=(const Journal&) = delete;
+
+  std::int64_t create_job(const std::string& mesh_path, const std::string& request_json);
+  /// The state change and its event, in one transaction.
+  void set_state(std::int64_t job, JobState state, const std::string& cause = "");
+  JobRecord job(std::int64_t id);
+  std::vector<JobRecord> unfinished_jobs();
+
+  /// A plan round for a job with its views (pose JSON per view), in one transaction; returns the plan id.
+  std::int64_t add_plan(std::int64_t job, int round, const std::vector<std::string>& view_poses);
+  /// The latest plan of a job, if any.
+  std::optional<std::int64_t> latest_plan(std::int64_t job);
+  std::vector<ViewRecord> views(std::int64_t plan);
+  std::optional<ViewRecord> first_unfinished_view(std::int64_t plan);
+
+  /// Makes the scan durable (temp, fsync, rename, directory fsync), then records it and marks the view
+  /// stored in one transaction. Refuses a view that already has a scan.
+  ScanRecord store_scan(std::int64_t plan, int view, const std::string& data);
+  std::vector<ScanRecord> scans(std::int64_t plan);
+  std::string read_scan(const ScanRecord& s);  // verifies size and CRC-32; JournalError if they do not match
+
+  void event(std::int64_t job, const std::string& text);
+  std::vector<std::string> events(std::int64_t job);
+
+  /// Every referenced scan file present with its size and checksum, every stored view with exactly one scan.
+  std::vector<std::string> check();
+  const std::filesystem::path& data_dir() const { return dir_; }
+
+ private:
+  void exec(const std::string& sql);
+  std::filesystem::path dir_;
+  sqlite3* db_ = nullptr;
+};
+
+}  // namespace scancell::daemon
