@@ -9,15 +9,23 @@ PKGS=(
   libgtest-dev libgmock-dev libbenchmark-dev libpng-dev
   coinor-libcbc-dev liborocos-kdl-dev libfcl-dev
   libmodbus-dev mbpoll libgpiod-dev libsqlite3-dev zlib1g-dev
+  liblcm-dev liblcm-bin iproute2
 )
 missing=()
 for p in "${PKGS[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
-[ ${#missing[@]} -eq 0 ] && exit 0
 SUDO=""
 [ "$(id -u)" -eq 0 ] || SUDO="sudo"
-echo "deps: installing ${missing[*]}"
-export DEBIAN_FRONTEND=noninteractive
-$SUDO apt-get update -qq
-$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "deps: installing ${missing[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+fi
+# LCM telemetry (udpm, ttl=0) needs a multicast route; keep it on the loopback so nothing leaves the host.
+if ! ip route show 239.255.0.0/16 2>/dev/null | grep -q "dev lo"; then
+  echo "deps: routing 239.255.0.0/16 over lo for LCM"
+  $SUDO ip link set lo multicast on || echo "deps: warning: cannot enable multicast on lo"
+  $SUDO ip route add 239.255.0.0/16 dev lo || echo "deps: warning: cannot add the LCM multicast route"
+fi
