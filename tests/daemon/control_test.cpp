@@ -1,0 +1,98 @@
+// The control socket refuses malformed, oversized, unknown and mistyped requests with a clear error and keeps
+// serving; valid requests reach the handler; the socket is 0660.
+#include <cstring>
+#include <filesystem>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include "daemon/control.hpp"
+
+namespace dm = scancell::daemon;
+using nlohmann::json;
+
+namespace {
+
+class Client {
+ public:
+  explicit Client(const std::string& path) {
+    fd_ = ::socket(AF_UNIX, SOCK_STREAM, 0);
+    sockaddr_un a{};
+    a.sun_family = AF_UNIX;
+    std::memcpy(a.sun_path, path.c_str(), path.size() + 1);
+    if (::connect(fd_, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0) throw std::runtime_error("connect");
+  }
+  ~Client() { ::close(fd_); }
+  void send_raw(const std::string& s) { ASSERT_EQ(::send(fd_, s.data(), s.size(), MSG_NOSIGNAL), static_cast<ssize_t>(s.size())); }
+  json line() {
+    while (buf_.find('\n') == std::string::npos) {
+      char c[4096];
+      const ssize_t n = ::recv(fd_, c, sizeof c, 0);
+      if (n <= 0) throw std::runtime_error("closed");
+      buf_.append(c, static_cast<std::size_t>(n));
+    }
+    const auto nl = buf_.find('\n');
+    const json j = json::parse(buf_.substr(0, nl));
+    buf_.erase(0, nl + 1);
+    return j;
+  }
+  json request(const std::string& s) {
+    send_raw(s + "\n");
+    return line();
+  }
+
+ private:
+  int fd_;
+  std::string buf_;
+};
+
+}  // namespace
+
+TEST(Control, BadRequestsAreRefusedClearlyAndTheServerKeepsServing) {
+  const std::string path = (std::filesystem::temp_directory_path() / ("scancell-ctl-" + std::to_string(::getpid()) + ".sock")).string();
+  int handled = 0;
+  dm::ControlServer server(path, [&](const json& req, const auto& send) -> json {
+    ++handled;
+    if (req["cmd"] == "watch") {
+      for (int k = 1; k <= 3; ++k) send({{"event", "view stored"}, {"view", k}});
+      return {{"outcome", "done"}};
+    }
+    if (req["cmd"] == "submit") return {{"job", 7}};
+    return {{"jobs", json::array()}};
+  });
+  struct stat st{};
+  ASSERT_EQ(::stat(path.c_str(), &st), 0);
+  EXPECT_EQ(st.st_mode & 0777, 0660u);
+  Client c(path);
+  auto refused = [&](const std::string& req, const std::string& expect) {
+    const json r = c.request(req);
+    EXPECT_FALSE(r["ok"].get<bool>()) << req;
+    EXPECT_NE(r["error"].get<std::string>().find(expect), std::string::npos) << r.dump();
+  };
+  refused("{\"cmd\": \"submit\", \"mesh\": ", "malformed JSON");
+  refused("[1, 2]", "must be a JSON object");
+  refused("{\"mesh\": \"a.off\"}", "missing \"cmd\"");
+  refused("{\"cmd\": \"explode\"}", "unknown command 'explode'");
+  refused("{\"cmd\": \"submit\", \"mesh\": \"a.off\", \"colour\": \"red\"}", "unknown field 'colour'");
+  refused("{\"cmd\": \"submit\", \"mesh\": 3}", "field 'mesh' must be a string");
+  refused("{\"cmd\": \"abort\", \"job\": \"7\"}", "field 'job' must be an integer");
+  refused("{\"cmd\": \"watch\"}", "missing field 'job'");
+  refused("{\"cmd\": \"submit\", \"mesh\": \"" + std::string(70000, 'x') + "\"}", "longer than 64 KiB");
+  EXPECT_EQ(handled, 0);  // nothing bad reached the daemon
+  // Still serving, on the same connection and a new one.
+  json r = c.request("{\"cmd\": \"submit\", \"mesh\": \"mushroom.off\", \"fit_mm\": 200}");
+  EXPECT_TRUE(r["ok"].get<bool>());
+  EXPECT_EQ(r["job"], 7);
+  Client c2(path);
+  c2.send_raw("{\"cmd\": \"watch\", \"job\": 7}\n");
+  for (int k = 1; k <= 3; ++k) EXPECT_EQ(c2.line()["view"], k);
+  r = c2.line();
+  EXPECT_TRUE(r["ok"].get<bool>());
+  EXPECT_EQ(r["outcome"], "done");
+  EXPECT_EQ(handled, 2);
+  EXPECT_EQ(server.refused(), 9u);
+}
