@@ -12,6 +12,18 @@ void check_device(RTCDevice device, const char* what) {
   if (err != RTC_ERROR_NONE) throw std::runtime_error(std::string("embree: ") + what + " failed, error " + std::to_string(err));
 }
 
+/// The Embree ray of one query (occlusion and intersection streams use the same layout).
+void fill_ray(RTCRay& e, const OcclusionRay& r, unsigned id) {
+  e.org_x = r.origin.x(); e.org_y = r.origin.y(); e.org_z = r.origin.z();
+  e.dir_x = r.dir.x(); e.dir_y = r.dir.y(); e.dir_z = r.dir.z();
+  e.tnear = r.t_near;
+  e.tfar = r.t_far;
+  e.time = 0.0f;
+  e.mask = 0xFFFFFFFFu;
+  e.id = id;
+  e.flags = 0;
+}
+
 }  // namespace
 
 OcclusionScene::OcclusionScene(const TriangleMesh& mesh) {
@@ -50,16 +62,7 @@ void OcclusionScene::occluded(const OcclusionRay* rays, std::size_t count, std::
   for (std::size_t base = 0; base < count; base += kStream) {
     const std::size_t m = std::min(kStream, count - base);
     for (std::size_t i = 0; i < m; ++i) {
-      const OcclusionRay& r = rays[base + i];
-      RTCRay& e = buf[i];
-      e.org_x = r.origin.x(); e.org_y = r.origin.y(); e.org_z = r.origin.z();
-      e.dir_x = r.dir.x(); e.dir_y = r.dir.y(); e.dir_z = r.dir.z();
-      e.tnear = r.t_near;
-      e.tfar = r.t_far;
-      e.time = 0.0f;
-      e.mask = 0xFFFFFFFFu;
-      e.id = static_cast<unsigned>(i);
-      e.flags = 0;
+      fill_ray(buf[i], rays[base + i], static_cast<unsigned>(i));
     }
     rtcOccluded1M(scene_, &ctx, buf, static_cast<unsigned>(m), sizeof(RTCRay));
     // Embree marks an occluded ray by setting tfar to -inf.
@@ -103,16 +106,8 @@ void OcclusionScene::first_hits(const OcclusionRay* rays, std::size_t count, Hit
   for (std::size_t base = 0; base < count; base += kStream) {
     const std::size_t m = std::min(kStream, count - base);
     for (std::size_t i = 0; i < m; ++i) {
-      const OcclusionRay& r = rays[base + i];
       RTCRayHit& e = buf[i];
-      e.ray.org_x = r.origin.x(); e.ray.org_y = r.origin.y(); e.ray.org_z = r.origin.z();
-      e.ray.dir_x = r.dir.x(); e.ray.dir_y = r.dir.y(); e.ray.dir_z = r.dir.z();
-      e.ray.tnear = r.t_near;
-      e.ray.tfar = r.t_far;
-      e.ray.time = 0.0f;
-      e.ray.mask = 0xFFFFFFFFu;
-      e.ray.id = static_cast<unsigned>(i);
-      e.ray.flags = 0;
+      fill_ray(e.ray, rays[base + i], static_cast<unsigned>(i));
       e.hit.geomID = RTC_INVALID_GEOMETRY_ID;
       e.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
     }
