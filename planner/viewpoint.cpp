@@ -21,6 +21,13 @@ Eigen::Vector3d twist_reference_x(const Eigen::Vector3d& zc) {
   return u.cross(zc).normalized();
 }
 
+/// Whether a camera position keeps the clearance from every rough-model point.
+bool keeps_clearance(const RoughModel& rough, const Eigen::Vector3d& pos, double clearance_mm) {
+  for (const auto& q : rough.points)
+    if ((q - pos).squaredNorm() < clearance_mm * clearance_mm) return false;
+  return true;
+}
+
 /// The bisector-tilted twin of a view aimed at `target`: turned about camera x by `tilt` so the target's
 /// normal bisects the laser and receiver rays, at the same stand-off from the target.
 Viewpoint bisector_twin(const Viewpoint& v, const Eigen::Vector3d& target, double standoff, double tilt) {
@@ -224,9 +231,7 @@ std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const Occlus
 
       // Collision avoidance zone: the camera must stand outside the object and clear of it.
       auto obstruction = [&](const Eigen::Vector3d& pos, const Eigen::Vector3d& out_dir) -> std::uint8_t {
-        double nearest2 = std::numeric_limits<double>::infinity();
-        for (const auto& q : rough.points) nearest2 = std::min(nearest2, (q - pos).squaredNorm());
-        if (nearest2 < st.clearance_mm * st.clearance_mm) return 3;
+        if (!keeps_clearance(rough, pos, st.clearance_mm)) return 3;
         if (auto hit = scene.first_hit(pos, out_dir, 0.0, 1e7); hit && hit->triangle < rough.triangles.size()) {
           // (Triangles past the rough model's are cell fixtures: leaving through one says nothing of the object.)
           const Triangle& t = rough.triangles[hit->triangle];
@@ -353,9 +358,7 @@ std::vector<Viewpoint> open_direction_viewpoints(const RoughModel& rough, const 
       for (int s = 0; s < levels; ++s) {
         const double standoff = levels == 1 ? r_near : r_near + (r_far - r_near) * s / (levels - 1);
         const Eigen::Vector3d position = p + standoff * d;
-        double nearest2 = std::numeric_limits<double>::infinity();
-        for (const auto& q : rough.points) nearest2 = std::min(nearest2, (q - position).squaredNorm());
-        if (nearest2 < st.clearance_mm * st.clearance_mm) continue;
+        if (!keeps_clearance(rough, position, st.clearance_mm)) continue;
         const double scan = design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad);
         const double tilt = 0.5 * std::atan2(sensor.baseline_mm, standoff);
         for (int level = 0; level < st.twist_levels; ++level) {
@@ -371,9 +374,7 @@ std::vector<Viewpoint> open_direction_viewpoints(const RoughModel& rough, const 
           if (st.bisector_tilt) {
             // Laser and receiver rays straddling the open direction: both fit a narrow opening.
             const Viewpoint t = bisector_twin(v, p, standoff, tilt);
-            double near2 = std::numeric_limits<double>::infinity();
-            for (const auto& q : rough.points) near2 = std::min(near2, (q - t.position).squaredNorm());
-            if (near2 >= st.clearance_mm * st.clearance_mm) per_row[k].push_back(t);
+            if (keeps_clearance(rough, t.position, st.clearance_mm)) per_row[k].push_back(t);
           }
         }
       }
