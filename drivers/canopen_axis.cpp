@@ -37,6 +37,24 @@ std::string object_name(std::uint16_t index, std::uint8_t sub) { return "object 
 
 }  // namespace
 
+can_frame sdo_frame(std::uint32_t cob_id, std::uint8_t command, std::uint16_t index, std::uint8_t sub, std::uint32_t value) {
+  can_frame f{};
+  f.can_id = cob_id;
+  f.can_dlc = 8;
+  f.data[0] = command;
+  f.data[1] = index & 0xFF;
+  f.data[2] = index >> 8;
+  f.data[3] = sub;
+  for (int k = 0; k < 4; ++k) f.data[4 + k] = (value >> (8 * k)) & 0xFF;
+  return f;
+}
+
+std::uint32_t sdo_value(const can_frame& f) {
+  std::uint32_t v = 0;
+  for (int k = 0; k < 4; ++k) v |= static_cast<std::uint32_t>(f.data[4 + k]) << (8 * k);
+  return v;
+}
+
 std::string sdo_abort_text(std::uint32_t code) {
   switch (code) {
     case 0x05040000: return "SDO protocol timed out";
@@ -154,26 +172,14 @@ void CanOpenAxis::nmt(std::uint8_t command) {
 can_frame CanOpenAxis::sdo_transfer(std::uint8_t command, std::uint16_t index, std::uint8_t sub, std::uint32_t value,
                                     const std::string& where) {
   for (int attempt = 0;; ++attempt) {
-    can_frame f{};
-    f.can_id = static_cast<canid_t>(0x600 + cfg_.node_id);
-    f.can_dlc = 8;
-    f.data[0] = command;
-    f.data[1] = index & 0xFF;
-    f.data[2] = index >> 8;
-    f.data[3] = sub;
-    for (int k = 0; k < 4; ++k) f.data[4 + k] = (value >> (8 * k)) & 0xFF;
-    link_.send(f);
+    link_.send(sdo_frame(static_cast<canid_t>(0x600 + cfg_.node_id), command, index, sub, value));
     const auto deadline = Clock::now() + cfg_.sdo_timeout;
     can_frame r{};
     while (Clock::now() < deadline) {
       if (!link_.receive(r, std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()) + std::chrono::milliseconds(1))) break;
       absorb(r);  // heartbeats and other traffic arrive in between
       if (r.can_id != static_cast<canid_t>(0x580 + cfg_.node_id)) continue;
-      if (r.data[0] == 0x80) {
-        std::uint32_t code = 0;
-        for (int k = 0; k < 4; ++k) code |= static_cast<std::uint32_t>(r.data[4 + k]) << (8 * k);
-        fail(DriverError::Kind::exception, where, "SDO abort: " + sdo_abort_text(code));
-      }
+      if (r.data[0] == 0x80) fail(DriverError::Kind::exception, where, "SDO abort: " + sdo_abort_text(sdo_value(r)));
       return r;
     }
     check_heartbeat("SDO " + where);
@@ -194,9 +200,7 @@ std::uint32_t CanOpenAxis::sdo_read(std::uint16_t index, std::uint8_t sub) {
   const std::string where = object_name(index, sub);
   const can_frame r = sdo_transfer(0x40, index, sub, 0, where);  // expedited upload request
   if ((r.data[0] & 0xE3) != 0x43) fail(DriverError::Kind::protocol, where, "unexpected SDO reply " + hex(r.data[0], 2));
-  std::uint32_t v = 0;
-  for (int k = 0; k < 4; ++k) v |= static_cast<std::uint32_t>(r.data[4 + k]) << (8 * k);
-  return v;
+  return sdo_value(r);
 }
 
 std::uint16_t CanOpenAxis::statusword() { return static_cast<std::uint16_t>(sdo_read(kStatusword, 0)); }

@@ -40,6 +40,12 @@ class CanLink {
   int fd_;
 };
 
+/// An expedited SDO frame (CiA 301): command byte, index (little endian), sub-index, 32-bit value (little
+/// endian). The driver's requests (0x600 + node) and the simulated drive's replies (0x580 + node) share it.
+can_frame sdo_frame(std::uint32_t cob_id, std::uint8_t command, std::uint16_t index, std::uint8_t sub, std::uint32_t value);
+/// The 32-bit value (or abort code) of an SDO frame.
+std::uint32_t sdo_value(const can_frame& f);
+
 /// SDO abort code (CiA 301) in words.
 std::string sdo_abort_text(std::uint32_t code);
 

@@ -1,5 +1,7 @@
 #include "drivers/sim/cia402_sim.hpp"
 
+#include "drivers/canopen_axis.hpp"
+
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -89,25 +91,19 @@ void Cia402DriveSim::step(double dt) {
 }
 
 void Cia402DriveSim::reply_sdo(std::uint8_t cmd, std::uint16_t index, std::uint8_t sub, std::uint32_t value) {
-  can_frame f{};
-  f.can_id = static_cast<canid_t>(0x580 + node_);
-  f.can_dlc = 8;
-  f.data[0] = cmd;
-  f.data[1] = index & 0xFF;
-  f.data[2] = index >> 8;
-  f.data[3] = sub;
-  for (int k = 0; k < 4; ++k) f.data[4 + k] = (value >> (8 * k)) & 0xFF;
+  const can_frame f = sdo_frame(static_cast<canid_t>(0x580 + node_), cmd, index, sub, value);
   (void)!::write(fd_, &f, sizeof f);
 }
 
-void Cia402DriveSim::on_frame(const unsigned char* d, std::uint32_t id) {
+void Cia402DriveSim::on_frame(const can_frame& frame) {
+  const unsigned char* d = frame.data;
+  const std::uint32_t id = frame.can_id;
   std::lock_guard<std::mutex> lock(mu_);
   if (id == 0x000) return;  // NMT: every state is "operational" enough for this drive
   if (id != static_cast<std::uint32_t>(0x600 + node_)) return;
   const std::uint16_t index = static_cast<std::uint16_t>(d[1] | (d[2] << 8));
   const std::uint8_t sub = d[3];
-  std::uint32_t value = 0;
-  for (int k = 0; k < 4; ++k) value |= static_cast<std::uint32_t>(d[4 + k]) << (8 * k);
+  const std::uint32_t value = sdo_value(frame);
   if (fault_ == CanFault::sdo_abort_once) {
     fault_ = CanFault::none;
     reply_sdo(0x80, index, sub, kAbortState);
@@ -237,7 +233,7 @@ void Cia402DriveSim::run() {
       can_frame f{};
       const ssize_t n = ::read(fd_, &f, sizeof f);
       if (n <= 0) return;
-      if (n == static_cast<ssize_t>(sizeof f)) on_frame(f.data, f.can_id);
+      if (n == static_cast<ssize_t>(sizeof f)) on_frame(f);
     }
   }
 }

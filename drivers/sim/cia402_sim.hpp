@@ -9,6 +9,8 @@
 #include <thread>
 #include <vector>
 
+#include <linux/can.h>
+
 namespace scancell::drivers::sim {
 
 enum class CanFault { none, sdo_abort_once, missing_heartbeat, drive_fault, following_error, bus_off };
@@ -40,7 +42,7 @@ class Cia402DriveSim {
  private:
   void run();
   void step(double dt);
-  void on_frame(const unsigned char* data, std::uint32_t id);
+  void on_frame(const can_frame& frame);
   void reply_sdo(std::uint8_t cmd, std::uint16_t index, std::uint8_t sub, std::uint32_t value);
   std::uint16_t statusword() const;
 
