@@ -17,7 +17,7 @@ namespace {
 
 const std::map<JobState, const char*> kNames = {
     {JobState::queued, "queued"},     {JobState::planning, "planning"}, {JobState::executing, "executing"},
-    {JobState::verifying, "verifying"}, {JobState::replanning, "replanning"}, {JobState::done, "done"},
+    {JobState::verifying, "verifying"}, {JobState::replanning, "replanning"}, {JobState::paused, "paused"}, {JobState::done, "done"},
     {JobState::stalled, "stalled"},   {JobState::aborted, "aborted"},   {JobState::faulted, "faulted"}};
 
 /// A prepared statement that finalises itself; errors name the database and the SQL.
@@ -120,9 +120,11 @@ Journal::Journal(const std::filesystem::path& dir) : dir_(dir) {
   exec("PRAGMA foreign_keys=ON");
   exec(R"(CREATE TABLE IF NOT EXISTS jobs (id INTEGER PRIMARY KEY, state TEXT NOT NULL, mesh TEXT NOT NULL,
                                            request TEXT NOT NULL, cause TEXT NOT NULL DEFAULT '',
+                                           result TEXT NOT NULL DEFAULT '',
                                            created REAL NOT NULL DEFAULT (julianday('now'))))");
   exec(R"(CREATE TABLE IF NOT EXISTS plans (id INTEGER PRIMARY KEY, job INTEGER NOT NULL REFERENCES jobs(id),
-                                            round INTEGER NOT NULL, UNIQUE(job, round)))");
+                                            round INTEGER NOT NULL, info TEXT NOT NULL DEFAULT '{}',
+                                            UNIQUE(job, round)))");
   exec(R"(CREATE TABLE IF NOT EXISTS views (plan INTEGER NOT NULL REFERENCES plans(id), idx INTEGER NOT NULL,
                                             pose TEXT NOT NULL, stored INTEGER NOT NULL DEFAULT 0,
                                             PRIMARY KEY(plan, idx)))");
@@ -145,6 +147,7 @@ void Journal::exec(const std::string& sql) {
 }
 
 std::int64_t Journal::create_job(const std::string& mesh, const std::string& request) {
+  std::lock_guard<std::recursive_mutex> lock(mu_);
   Transaction t(db_);
   Stmt(db_, "INSERT INTO jobs(state, mesh, request) VALUES (?, ?, ?)").bind(1, std::string("queued")).bind(2, mesh).bind(3, request).step();
   const std::int64_t id = sqlite3_last_insert_rowid(db_);
@@ -154,6 +157,7 @@ std::int64_t Journal::create_job(const std::string& mesh, const std::string& req
 }
 
 void Journal::set_state(std::int64_t job, JobState state, const std::string& cause) {
+  std::lock_guard<std::recursive_mutex> lock(mu_);
   Transaction t(db_);
   Stmt(db_, "UPDATE jobs SET state = ?, cause = ? WHERE id = ?").bind(1, std::string(to_string(state))).bind(2, cause).bind(3, job).step();
   if (sqlite3_changes(db_) != 1) throw JournalError("journal: no job " + std::to_string(job));
@@ -162,22 +166,57 @@ void Journal::set_state(std::int64_t job, JobState state, const std::string& cau
 }
 
 JobRecord Journal::job(std::int64_t id) {
-  Stmt s(db_, "SELECT id, state, mesh, request, cause FROM jobs WHERE id = ?");
+  std::lock_guard<std::recursive_mutex> lock(mu_);
+  Stmt s(db_, "SELECT id, state, mesh, request, cause, result FROM jobs WHERE id = ?");
   s.bind(1, id);
   if (!s.step()) throw JournalError("journal: no job " + std::to_string(id));
-  return {s.i64(0), job_state_from(s.text(1)), s.text(2), s.text(3), s.text(4)};
+  return {s.i64(0), job_state_from(s.text(1)), s.text(2), s.text(3), s.text(4), s.text(5)};
 }
 
-std::vector<JobRecord> Journal::unfinished_jobs() {
+std::vector<JobRecord> Journal::jobs(int limit) {
+  std::lock_guard<std::recursive_mutex> lock(mu_);
   std::vector<JobRecord> out;
-  Stmt s(db_, "SELECT id, state, mesh, request, cause FROM jobs WHERE state NOT IN ('done', 'stalled', 'aborted') ORDER BY id");
-  while (s.step()) out.push_back({s.i64(0), job_state_from(s.text(1)), s.text(2), s.text(3), s.text(4)});
+  Stmt s(db_, "SELECT id, state, mesh, request, cause, result FROM jobs ORDER BY id DESC LIMIT ?");
+  s.bind(1, static_cast<std::int64_t>(limit));
+  while (s.step()) out.push_back({s.i64(0), job_state_from(s.text(1)), s.text(2), s.text(3), s.text(4), s.text(5)});
   return out;
 }
 
-std::int64_t Journal::add_plan(std::int64_t job, int round, const std::vector<std::string>& poses) {
+void Journal::set_result(std::int64_t job, const std::string& result) {
+  std::lock_guard<std::recursive_mutex> lock(mu_);
+  Stmt(db_, "UPDATE jobs SET result = ? WHERE id = ?").bind(1, result).bind(2, job).step();
+  if (sqlite3_changes(db_) != 1) throw JournalError("journal: no job " + std::to_string(job));
+}
+
+std::vector<std::int64_t> Journal::plans(std::int64_t job) {
+  std::lock_guard<std::recursive_mutex> lock(mu_);
+  std::vector<std::int64_t> out;
+  Stmt s(db_, "SELECT id FROM plans WHERE job = ? ORDER BY round");
+  s.bind(1, job);
+  while (s.step()) out.push_back(s.i64(0));
+  return out;
+}
+
+std::string Journal::plan_info(std::int64_t plan) {
+  std::lock_guard<std::recursive_mutex> lock(mu_);
+  Stmt s(db_, "SELECT info FROM plans WHERE id = ?");
+  s.bind(1, plan);
+  if (!s.step()) throw JournalError("journal: no plan " + std::to_string(plan));
+  return s.text(0);
+}
+
+std::vector<JobRecord> Journal::unfinished_jobs() {
+  std::lock_guard<std::recursive_mutex> lock(mu_);
+  std::vector<JobRecord> out;
+  Stmt s(db_, "SELECT id, state, mesh, request, cause, result FROM jobs WHERE state NOT IN ('done', 'stalled', 'aborted') ORDER BY id");
+  while (s.step()) out.push_back({s.i64(0), job_state_from(s.text(1)), s.text(2), s.text(3), s.text(4), s.text(5)});
+  return out;
+}
+
+std::int64_t Journal::add_plan(std::int64_t job, int round, const std::vector<std::string>& poses, const std::string& info) {
+  std::lock_guard<std::recursive_mutex> lock(mu_);
   Transaction t(db_);
-  Stmt(db_, "INSERT INTO plans(job, round) VALUES (?, ?)").bind(1, job).bind(2, round).step();
+  Stmt(db_, "INSERT INTO plans(job, round, info) VALUES (?, ?, ?)").bind(1, job).bind(2, round).bind(3, info).step();
   const std::int64_t plan = sqlite3_last_insert_rowid(db_);
   for (std::size_t k = 0; k < poses.size(); ++k)
     Stmt(db_, "INSERT INTO views(plan, idx, pose) VALUES (?, ?, ?)").bind(1, plan).bind(2, static_cast<std::int64_t>(k)).bind(3, poses[k]).step();
@@ -187,6 +226,7 @@ std::int64_t Journal::add_plan(std::int64_t job, int round, const std::vector<st
 }
 
 std::optional<std::int64_t> Journal::latest_plan(std::int64_t job) {
+  std::lock_guard<std::recursive_mutex> lock(mu_);
   Stmt s(db_, "SELECT id FROM plans WHERE job = ? ORDER BY round DESC LIMIT 1");
   s.bind(1, job);
   if (!s.step()) return std::nullopt;
@@ -194,6 +234,7 @@ std::optional<std::int64_t> Journal::latest_plan(std::int64_t job) {
 }
 
 std::vector<ViewRecord> Journal::views(std::int64_t plan) {
+  std::lock_guard<std::recursive_mutex> lock(mu_);
   std::vector<ViewRecord> out;
   Stmt s(db_, "SELECT plan, idx, pose, stored FROM views WHERE plan = ? ORDER BY idx");
   s.bind(1, plan);
@@ -202,6 +243,7 @@ std::vector<ViewRecord> Journal::views(std::int64_t plan) {
 }
 
 std::optional<ViewRecord> Journal::first_unfinished_view(std::int64_t plan) {
+  std::lock_guard<std::recursive_mutex> lock(mu_);
   Stmt s(db_, "SELECT plan, idx, pose, stored FROM views WHERE plan = ? AND stored = 0 ORDER BY idx LIMIT 1");
   s.bind(1, plan);
   if (!s.step()) return std::nullopt;
@@ -209,6 +251,7 @@ std::optional<ViewRecord> Journal::first_unfinished_view(std::int64_t plan) {
 }
 
 ScanRecord Journal::store_scan(std::int64_t plan, int view, const std::string& data) {
+  std::lock_guard<std::recursive_mutex> lock(mu_);
   {
     Stmt s(db_, "SELECT stored FROM views WHERE plan = ? AND idx = ?");
     s.bind(1, plan).bind(2, static_cast<std::int64_t>(view));
@@ -237,6 +280,7 @@ ScanRecord Journal::store_scan(std::int64_t plan, int view, const std::string& d
 }
 
 std::vector<ScanRecord> Journal::scans(std::int64_t plan) {
+  std::lock_guard<std::recursive_mutex> lock(mu_);
   std::vector<ScanRecord> out;
   Stmt s(db_, "SELECT plan, view, file, bytes, crc32 FROM scans WHERE plan = ? ORDER BY view");
   s.bind(1, plan);
@@ -246,6 +290,7 @@ std::vector<ScanRecord> Journal::scans(std::int64_t plan) {
 }
 
 std::string Journal::read_scan(const ScanRecord& r) {
+  std::lock_guard<std::recursive_mutex> lock(mu_);
   std::ifstream f(dir_ / r.file, std::ios::binary);
   if (!f) throw JournalError((dir_ / r.file).string() + ": missing");
   std::string data((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
@@ -255,10 +300,12 @@ std::string Journal::read_scan(const ScanRecord& r) {
 }
 
 void Journal::event(std::int64_t job, const std::string& text) {
+  std::lock_guard<std::recursive_mutex> lock(mu_);
   Stmt(db_, "INSERT INTO events(job, text) VALUES (?, ?)").bind(1, job).bind(2, text).step();
 }
 
 std::vector<std::string> Journal::events(std::int64_t job) {
+  std::lock_guard<std::recursive_mutex> lock(mu_);
   std::vector<std::string> out;
   Stmt s(db_, "SELECT text FROM events WHERE job = ? ORDER BY id");
   s.bind(1, job);
@@ -267,6 +314,7 @@ std::vector<std::string> Journal::events(std::int64_t job) {
 }
 
 std::vector<std::string> Journal::check() {
+  std::lock_guard<std::recursive_mutex> lock(mu_);
   std::vector<std::string> problems;
   Stmt s(db_, "SELECT plan, view, file, bytes, crc32 FROM scans");
   while (s.step()) {

@@ -6,6 +6,7 @@
 // without a stored scan: no stored scan is lost, none is repeated, no partial file is referenced.
 #include <cstdint>
 #include <filesystem>
+#include <mutex>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -15,7 +16,7 @@ struct sqlite3;
 
 namespace scancell::daemon {
 
-enum class JobState { queued, planning, executing, verifying, replanning, done, stalled, aborted, faulted };
+enum class JobState { queued, planning, executing, verifying, replanning, paused, done, stalled, aborted, faulted };
 const char* to_string(JobState s);
 JobState job_state_from(const std::string& s);  // throws std::invalid_argument
 bool finished(JobState s);                     // done, stalled, aborted
@@ -24,6 +25,7 @@ struct JobRecord {
   std::int64_t id = 0;
   JobState state = JobState::queued;
   std::string mesh_path, request_json, cause;
+  std::string result_json;  // the outcome summary once finished ("" before)
 };
 
 struct ViewRecord {
@@ -60,8 +62,16 @@ class Journal {
   JobRecord job(std::int64_t id);
   std::vector<JobRecord> unfinished_jobs();
 
-  /// A plan round for a job with its views (pose JSON per view), in one transaction; returns the plan id.
-  std::int64_t add_plan(std::int64_t job, int round, const std::vector<std::string>& view_poses);
+  /// A plan round for a job with its views (pose JSON per view) and what the round needs to be resumed
+  /// (`info`, JSON), in one transaction; returns the plan id.
+  std::int64_t add_plan(std::int64_t job, int round, const std::vector<std::string>& view_poses,
+                        const std::string& info = "{}");
+  /// Plan ids of a job in round order.
+  std::vector<std::int64_t> plans(std::int64_t job);
+  std::string plan_info(std::int64_t plan);
+  /// The job's outcome summary (JSON), kept with the job.
+  void set_result(std::int64_t job, const std::string& result_json);
+  std::vector<JobRecord> jobs(int limit = 100);  // newest first
   /// The latest plan of a job, if any.
   std::optional<std::int64_t> latest_plan(std::int64_t job);
   std::vector<ViewRecord> views(std::int64_t plan);
@@ -82,6 +92,9 @@ class Journal {
 
  private:
   void exec(const std::string& sql);
+  // One connection shared by the job runner and the control socket's clients: every public call holds this,
+  // so a multi-statement transaction is never interleaved with another thread's.
+  std::recursive_mutex mu_;
   std::filesystem::path dir_;
   sqlite3* db_ = nullptr;
 };

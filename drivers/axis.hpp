@@ -38,8 +38,16 @@ class Axis {
   virtual void enable() = 0;
   virtual void disable() = 0;
   virtual void home(std::chrono::milliseconds timeout) = 0;
-  /// Commands the move and waits for in-position; DriverError(motion_timeout) and a halt when it does not come.
-  virtual void move_to(double target, std::chrono::milliseconds timeout) = 0;
+  /// Commands the move and returns at once; `velocity` (per second) > 0 overrides the configured profile
+  /// velocity for this move (the line-scan sweep runs at the scan speed).
+  virtual void begin_move(double target, double velocity = 0.0) = 0;
+  /// Waits for in-position after begin_move; DriverError(motion_timeout) and a halt when it does not come,
+  /// DriverError(fault) when the axis stopped short of `target` (halted, e-stop).
+  virtual void finish_move(double target, std::chrono::milliseconds timeout) = 0;
+  void move_to(double target, std::chrono::milliseconds timeout) {
+    begin_move(target);
+    finish_move(target, timeout);
+  }
   virtual void stop() = 0;  // controlled stop
   virtual void halt() = 0;  // quick stop
   virtual void reset_fault() = 0;
@@ -60,6 +68,10 @@ class Positioner {
   void move(const std::map<std::string, double>& targets, std::chrono::milliseconds timeout);
   /// Quick-stops every axis (e-stop path); errors of individual axes are collected, not thrown midway.
   std::vector<std::string> halt_all();
+  /// Starts one axis' move at `velocity` (checked against the soft limits and the e-stop latch like move())
+  /// and returns at once: the caller polls the axis (line-scan sweep with position-compare triggering) and
+  /// ends with axis(name).finish_move().
+  void begin_move(const std::string& name, double target, double velocity);
   std::vector<std::string> names() const;
 
   /// E-stop latch: halts every axis now; move() is refused until reset_estop().
@@ -68,6 +80,7 @@ class Positioner {
   bool estop_latched() const { return latched_; }
 
  private:
+  void check_target(const std::string& name, double target) const;
   std::atomic<bool> latched_{false};
   std::string latch_reason_;
   struct Entry {

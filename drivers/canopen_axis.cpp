@@ -252,17 +252,23 @@ void CanOpenAxis::home(std::chrono::milliseconds timeout) {
   homed_ = true;
 }
 
-void CanOpenAxis::move_to(double target, std::chrono::milliseconds timeout) {
+void CanOpenAxis::begin_move(double target, double velocity) {
   refuse_if_faulted("move");
   if (!std::isfinite(target)) throw DriverError(DriverError::Kind::refused, cfg_.name, "move", "target is not finite");
+  if (!std::isfinite(velocity) || velocity < 0.0)
+    throw DriverError(DriverError::Kind::refused, cfg_.name, "move", "velocity is not a finite non-negative number");
   const auto counts = static_cast<std::int32_t>(std::llround(target * cfg_.counts_per_unit));
+  const double v = velocity > 0.0 ? velocity : cfg_.profile_velocity;
   sdo_write(kModes, 0, 1, 1);  // profile position
   sdo_write(kTarget, 0, static_cast<std::uint32_t>(counts), 4);
-  sdo_write(kProfileVelocity, 0, static_cast<std::uint32_t>(std::llround(cfg_.profile_velocity * cfg_.counts_per_unit)), 4);
-  // New set-point handshake: raise bit 4, wait for the acknowledge, lower it, wait for target reached.
+  sdo_write(kProfileVelocity, 0, static_cast<std::uint32_t>(std::llround(v * cfg_.counts_per_unit)), 4);
+  // New set-point handshake: raise bit 4, wait for the acknowledge, lower it; finish_move waits for the target.
   sdo_write(kControlword, 0, kCwEnableOp | kCwNewSetpoint, 2);
   wait_status(kSwSetpointAck, kSwSetpointAck, std::chrono::milliseconds(500), "set-point acknowledge");
   sdo_write(kControlword, 0, kCwEnableOp, 2);
+}
+
+void CanOpenAxis::finish_move(double target, std::chrono::milliseconds timeout) {
   wait_status(kSwTargetReached | kSwSetpointAck, kSwTargetReached, timeout, "move to " + std::to_string(target));
 }
 

@@ -67,7 +67,8 @@ class CanOpenAxis : public Axis {
   void enable() override;
   void disable() override;
   void home(std::chrono::milliseconds timeout) override;
-  void move_to(double target, std::chrono::milliseconds timeout) override;
+  void begin_move(double target, double velocity = 0.0) override;
+  void finish_move(double target, std::chrono::milliseconds timeout) override;
   void stop() override;
   void halt() override;
   void reset_fault() override;

@@ -203,11 +203,14 @@ void ModbusAxis::home(std::chrono::milliseconds timeout) {
   wait_for(mm::kHomed | mm::kInPosition, timeout, "home");
 }
 
-void ModbusAxis::move_to(double target, std::chrono::milliseconds timeout) {
+void ModbusAxis::begin_move(double target, double velocity) {
   refuse_if_faulted("move");
   if (!std::isfinite(target)) throw DriverError(DriverError::Kind::refused, cfg_.name, "move", "target is not finite");
+  if (!std::isfinite(velocity) || velocity < 0.0)
+    throw DriverError(DriverError::Kind::refused, cfg_.name, "move", "velocity is not a finite non-negative number");
   const auto counts = static_cast<std::int32_t>(std::llround(target * cfg_.counts_per_unit));
-  const auto vel = static_cast<std::int32_t>(std::llround(cfg_.profile_velocity * cfg_.counts_per_unit));
+  const double v = velocity > 0.0 ? velocity : cfg_.profile_velocity;
+  const auto vel = static_cast<std::int32_t>(std::llround(v * cfg_.counts_per_unit));
   std::uint16_t tv[2];
   mm::put_i32(tv, 0, counts);
   write(mm::kTargetHi, 2, tv, "move target");
@@ -215,6 +218,10 @@ void ModbusAxis::move_to(double target, std::chrono::milliseconds timeout) {
   mm::put_i32(vv, 0, vel);
   write(mm::kVelocityHi, 2, vv, "move velocity");
   command(mm::kMove, "move");
+}
+
+void ModbusAxis::finish_move(double target, std::chrono::milliseconds timeout) {
+  const auto counts = static_cast<std::int32_t>(std::llround(target * cfg_.counts_per_unit));
   wait_for(mm::kInPosition, timeout, "move to " + std::to_string(target));
   // In position but elsewhere: the move was stopped (halt, e-stop) before its target.
   std::uint16_t actual[2];
@@ -261,18 +268,25 @@ std::vector<std::string> Positioner::latch_estop(const std::string& why) {
 
 void Positioner::reset_estop() { latched_ = false; }
 
-void Positioner::move(const std::map<std::string, double>& targets, std::chrono::milliseconds timeout) {
+void Positioner::check_target(const std::string& n, double t) const {
   if (latched_)
     throw DriverError(DriverError::Kind::refused, "positioner", "e-stop", "latched (" + latch_reason_ + "): reset first");
+  auto it = axes_.find(n);
+  if (it == axes_.end()) throw DriverError(DriverError::Kind::refused, n, "move", "no such axis");
+  const SoftLimits& l = it->second.limits;
+  if (!(t >= l.min && t <= l.max))
+    throw DriverError(DriverError::Kind::refused, n, "soft limit",
+                      "target " + std::to_string(t) + " outside [" + std::to_string(l.min) + ", " + std::to_string(l.max) + "]");
+}
+
+void Positioner::begin_move(const std::string& name, double target, double velocity) {
+  check_target(name, target);
+  axes_.at(name).axis->begin_move(target, velocity);
+}
+
+void Positioner::move(const std::map<std::string, double>& targets, std::chrono::milliseconds timeout) {
   // Every target is checked before any command leaves the process.
-  for (const auto& [n, t] : targets) {
-    auto it = axes_.find(n);
-    if (it == axes_.end()) throw DriverError(DriverError::Kind::refused, n, "move", "no such axis");
-    const SoftLimits& l = it->second.limits;
-    if (!(t >= l.min && t <= l.max))
-      throw DriverError(DriverError::Kind::refused, n, "soft limit",
-                        "target " + std::to_string(t) + " outside [" + std::to_string(l.min) + ", " + std::to_string(l.max) + "]");
-  }
+  for (const auto& [n, t] : targets) check_target(n, t);
   // All axes move at once (the planner's move times assume it): one thread per axis, each with its own
   // transaction lock. If any axis fails, every axis is halted and the first error is reported.
   std::vector<std::thread> movers;

@@ -8,6 +8,7 @@
 #include <deque>
 #include <functional>
 #include <mutex>
+#include <thread>
 #include <vector>
 
 #include <Eigen/Core>
@@ -38,8 +39,13 @@ class Scanner {
 /// `camera_pose()` returns at that instant (the cell's kinematics at the simulated axes' positions).
 class SimScanner : public Scanner, public DigitalOutput {
  public:
-  SimScanner(planner::SensorModel sensor, const planner::TriangleMesh& object_mm,
-             std::function<Eigen::Isometry3d()> camera_pose, std::uint64_t seed = 1);
+  /// `scene_mm`: the object in its frame, optionally followed by cell fixtures (the plate) from triangle
+  /// `object_triangles` on, which block rays but give no samples (0: all of it is the object).
+  SimScanner(planner::SensorModel sensor, const planner::TriangleMesh& scene_mm,
+             std::function<Eigen::Isometry3d()> camera_pose, std::uint64_t seed = 1, std::size_t object_triangles = 0);
+  ~SimScanner() override;
+  SimScanner(const SimScanner&) = delete;
+  SimScanner& operator=(const SimScanner&) = delete;
   void set(bool level) override;  // the trigger input
   Profile acquire(std::chrono::milliseconds timeout) override;
 
@@ -48,11 +54,15 @@ class SimScanner : public Scanner, public DigitalOutput {
   planner::OcclusionScene scene_;
   std::function<Eigen::Isometry3d()> pose_;
   std::uint64_t seed_;
+  std::size_t object_triangles_;
   bool level_ = false;
   std::uint64_t next_ = 0;
   std::mutex mu_;
   std::condition_variable cv_;
-  std::deque<Profile> ready_;
+  std::deque<Profile> pending_, ready_;  // triggered, not yet measured; measured, not yet acquired
+  bool stop_ = false;
+  void measure_loop();
+  std::thread worker_;
 };
 
 }  // namespace scancell::drivers

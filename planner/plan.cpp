@@ -28,7 +28,7 @@ nlohmann::json vec(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
 
 ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const ModelSpec& spec,
                     const PlannerSettings& settings_in, const RoughModelOptions& rough_options, int threads,
-                    const CellModel* cell_in) {
+                    const CellModel* cell_in, const std::vector<std::uint8_t>* measured_rows) {
   validate(sensor);
   validate(spec);
   ViewPlan p;
@@ -58,6 +58,24 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     auto t = Clock::now();
     p.rough = build_rough_model(std::move(object_mm), rough_options, &p.rough_report);
     p.times.rough_model_s = since(t);
+    if (measured_rows && measured_rows->size() != p.rough.size())
+      throw DataError("replan: " + std::to_string(measured_rows->size()) + " measured-row flags for a rough model of " +
+                      std::to_string(p.rough.size()) + " rows (not the rough model the views were measured on)");
+    // Rows already measured weigh nothing and leave every column: the cover goes after the rest.
+    std::vector<double> row_weight = p.rough.area_mm2;
+    auto strip_measured = [&](MeasurabilityMatrix& m) {
+      if (!measured_rows) return;
+      for (auto& c : m.columns) {
+        std::vector<std::uint32_t> keep;
+        c.for_each([&](std::uint32_t r) {
+          if (!(*measured_rows)[r]) keep.push_back(r);
+        });
+        c = MeasurabilityColumn(std::move(keep), m.n_rows);
+      }
+    };
+    if (measured_rows)
+      for (std::size_t r = 0; r < row_weight.size(); ++r)
+        if ((*measured_rows)[r]) row_weight[r] = 0.0;
 
     t = Clock::now();
     // In a cell the fixtures (the turntable plate) occlude too: the underside of an object on the plate is
@@ -133,8 +151,11 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
 
     t = Clock::now();
     auto matrix = build_measurability(p.rough, scene, sensor, spec, candidates, settings.matrix, &p.matrix_stats);
+    strip_measured(matrix);
     // Rows nothing measures: add open-direction views for them (deep holes, undercuts) and their columns.
-    const auto unmeasurable = matrix.unmeasurable_rows();
+    auto unmeasurable = matrix.unmeasurable_rows();
+    if (measured_rows)
+      std::erase_if(unmeasurable, [&](std::uint32_t r) { return (*measured_rows)[r] != 0; });
     p.generation.rows_unmeasurable_before = unmeasurable.size();
     if (settings.viewpoints.open_direction_views && !unmeasurable.empty()) {
       const std::size_t max_rows = std::max<std::size_t>(16, p.rough.size() / static_cast<std::size_t>(std::max(1, settings.viewpoints.position_decimation)));
@@ -149,6 +170,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
       detuned.density_per_mm2 *= 1.1;
       MatrixStats extra_stats;
       auto more = build_measurability(p.rough, scene, sensor, detuned, extra, settings.matrix, &extra_stats);
+      strip_measured(more);
       p.generation.open_direction_candidates = extra.size();
       candidates.insert(candidates.end(), extra.begin(), extra.end());
       for (auto& c : more.columns) matrix.columns.push_back(std::move(c));
@@ -185,10 +207,10 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
         for (std::size_t i = 0; i < candidates.size(); ++i)
           cost.push_back(scan_time_s(*p.cell, candidates[i].scan_length_mm) +
                          0.5 * move_time_s(*p.cell, p.cell->home(), q_of[i]) + 1e-3);
-      p.cover = exact_cover(matrix, p.rough.area_mm2, p.settings.cover, cost, &p.exact);
+      p.cover = exact_cover(matrix, row_weight, p.settings.cover, cost, &p.exact);
       p.exact_used = true;
     } else {
-      p.cover = greedy_cover(matrix, p.rough.area_mm2, p.settings.cover);
+      p.cover = greedy_cover(matrix, row_weight, p.settings.cover);
     }
     if (p.cell && !p.cover.views.empty()) {
       // Execute in the order that minimises travel from home; the cumulative figures follow that order.
@@ -197,7 +219,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
       const auto order = travel_order(*p.cell, targets, p.cell->home());
       std::vector<std::uint32_t> ordered;
       for (auto k : order) ordered.push_back(p.cover.views[k]);
-      CoverResult re = describe_cover(matrix, p.rough.area_mm2, p.settings.cover, ordered);
+      CoverResult re = describe_cover(matrix, row_weight, p.settings.cover, ordered);
       re.blocked_by_registration = p.cover.blocked_by_registration;
       re.bridge_views = p.cover.bridge_views;
       re.redundant_removed = p.cover.redundant_removed;

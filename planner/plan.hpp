@@ -65,9 +65,12 @@ struct ViewPlan {
 /// Plans views for an object already in millimetres. `threads` = 0 uses all cores; the plan does not depend
 /// on it. With a cell: candidates are moved to the nearest reachable pose and checked for collisions, the
 /// object is placed on the table, views are ordered for least travel and carry their axis targets.
+/// Replanning (thesis table 3.1): `measured_rows` (one flag per rough-model row, from MeasuredCoverage on the
+/// same mesh and options, hence the same rough model) removes what the executed views already measured from
+/// the rows to cover; the estimate then refers to the remaining area only.
 ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const ModelSpec& spec,
                     const PlannerSettings& settings, const RoughModelOptions& rough_options, int threads = 0,
-                    const CellModel* cell = nullptr);
+                    const CellModel* cell = nullptr, const std::vector<std::uint8_t>* measured_rows = nullptr);
 
 /// The documented plan file (docs/plan-format.md).
 nlohmann::json plan_to_json(const ViewPlan& plan);

@@ -13,6 +13,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "planner/errors.hpp"
 #include "planner/measurability.hpp"
 #include "planner/rough_model.hpp"
 
@@ -43,6 +44,60 @@ std::vector<Eigen::Vector3d> face_normals(const TriangleMesh& m) {
   return n;
 }
 
+/// Fine-model vertices one range image measures: a spec-compliant sample (σz, local density) within 1/√ρ of
+/// the vertex, on the vertex's side of the surface.
+std::vector<std::uint8_t> vertices_measured(const TriangleMesh& fine, const std::vector<Eigen::Vector3d>& vertex_normals,
+                                            const std::vector<Eigen::Vector3d>& tri_normals, const RangeImage& img,
+                                            const ModelSpec& spec, std::size_t* compliant_samples) {
+  const std::size_t nv = fine.vertices.size();
+  const double radius = 1.0 / std::sqrt(spec.density_per_mm2);
+  SampleGrid grid;
+  grid.cell = radius;
+  for (int j = 0; j < img.rows; ++j)
+    for (int i = 0; i < img.columns; ++i) {
+      const RangeSample& s = img.at(i, j);
+      if (!s.valid() || s.sigma_z_mm > spec.precision_mm) continue;
+      if (sample_density_per_mm2(img, i, j) < spec.density_per_mm2) continue;
+      const std::uint32_t idx = static_cast<std::uint32_t>(j) * img.columns + i;
+      const Eigen::Vector3d p = s.object_mm.cast<double>();
+      grid.keyed.emplace_back(SampleGrid::key(grid.index(p.x()), grid.index(p.y()), grid.index(p.z())), idx);
+      grid.box.extend(p);
+    }
+  if (compliant_samples) *compliant_samples = grid.keyed.size();
+  std::sort(grid.keyed.begin(), grid.keyed.end());
+
+  std::vector<std::uint8_t> hit(nv, 0);
+  if (!grid.keyed.empty()) {
+    Eigen::AlignedBox3d reach = grid.box;
+    reach.min().array() -= radius;
+    reach.max().array() += radius;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 1024), [&](const tbb::blocked_range<std::size_t>& r) {
+      for (std::size_t v = r.begin(); v != r.end(); ++v) {
+        const Eigen::Vector3d& p = fine.vertices[v];
+        if (!reach.contains(p)) continue;
+        const long cx = grid.index(p.x()), cy = grid.index(p.y()), cz = grid.index(p.z());
+        bool found = false;
+        for (long dx = -1; dx <= 1 && !found; ++dx)
+          for (long dy = -1; dy <= 1 && !found; ++dy)
+            for (long dz = -1; dz <= 1 && !found; ++dz) {
+              const std::uint64_t key = SampleGrid::key(cx + dx, cy + dy, cz + dz);
+              auto it = std::lower_bound(grid.keyed.begin(), grid.keyed.end(), std::make_pair(key, std::uint32_t{0}));
+              for (; it != grid.keyed.end() && it->first == key; ++it) {
+                const RangeSample& s = img.samples[it->second];
+                if ((s.object_mm.cast<double>() - p).squaredNorm() > radius * radius) continue;
+                // The sample must lie on the vertex's side of the surface (thin walls, sheet edges).
+                if (tri_normals[s.triangle].dot(vertex_normals[v]) <= 0.0) continue;
+                found = true;
+                break;
+              }
+            }
+        hit[v] = found;
+      }
+    });
+  }
+  return hit;
+}
+
 }  // namespace
 
 Verification verify_views(const TriangleMesh& fine, const SensorModel& sensor, const ModelSpec& spec,
@@ -62,7 +117,6 @@ Verification verify_views(const TriangleMesh& fine, const SensorModel& sensor, c
   TriangleMesh scene_mesh = fine;
   append_mesh(scene_mesh, options.occluders);
   const OcclusionScene scene(scene_mesh);
-  const double radius = 1.0 / std::sqrt(spec.density_per_mm2);
 
   std::vector<std::vector<std::uint32_t>> measured_by(views.size());
   std::vector<std::uint16_t> times_measured(nv, 0);
@@ -79,51 +133,7 @@ Verification verify_views(const TriangleMesh& fine, const SensorModel& sensor, c
     so.object_triangles = options.occluders.triangles.empty() ? 0 : fine.triangles.size();
     const RangeImage img = virtual_scan(scene, sensor, vv.executed, so, &vv.scan);
 
-    SampleGrid grid;
-    grid.cell = radius;
-    std::vector<std::uint32_t> compliant;
-    for (int j = 0; j < img.rows; ++j)
-      for (int i = 0; i < img.columns; ++i) {
-        const RangeSample& s = img.at(i, j);
-        if (!s.valid() || s.sigma_z_mm > spec.precision_mm) continue;
-        if (sample_density_per_mm2(img, i, j) < spec.density_per_mm2) continue;
-        const std::uint32_t idx = static_cast<std::uint32_t>(j) * img.columns + i;
-        const Eigen::Vector3d p = s.object_mm.cast<double>();
-        grid.keyed.emplace_back(SampleGrid::key(grid.index(p.x()), grid.index(p.y()), grid.index(p.z())), idx);
-        grid.box.extend(p);
-      }
-    vv.compliant_samples = grid.keyed.size();
-    std::sort(grid.keyed.begin(), grid.keyed.end());
-
-    std::vector<std::uint8_t> hit(nv, 0);
-    if (!grid.keyed.empty()) {
-      Eigen::AlignedBox3d reach = grid.box;
-      reach.min().array() -= radius;
-      reach.max().array() += radius;
-      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 1024), [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t v = r.begin(); v != r.end(); ++v) {
-          const Eigen::Vector3d& p = fine.vertices[v];
-          if (!reach.contains(p)) continue;
-          const long cx = grid.index(p.x()), cy = grid.index(p.y()), cz = grid.index(p.z());
-          bool found = false;
-          for (long dx = -1; dx <= 1 && !found; ++dx)
-            for (long dy = -1; dy <= 1 && !found; ++dy)
-              for (long dz = -1; dz <= 1 && !found; ++dz) {
-                const std::uint64_t key = SampleGrid::key(cx + dx, cy + dy, cz + dz);
-                auto it = std::lower_bound(grid.keyed.begin(), grid.keyed.end(), std::make_pair(key, std::uint32_t{0}));
-                for (; it != grid.keyed.end() && it->first == key; ++it) {
-                  const RangeSample& s = img.samples[it->second];
-                  if ((s.object_mm.cast<double>() - p).squaredNorm() > radius * radius) continue;
-                  // The sample must lie on the vertex's side of the surface (thin walls, sheet edges).
-                  if (tri_normals[s.triangle].dot(vertex_normals[v]) <= 0.0) continue;
-                  found = true;
-                  break;
-                }
-              }
-          hit[v] = found;
-        }
-      });
-    }
+    const std::vector<std::uint8_t> hit = vertices_measured(fine, vertex_normals, tri_normals, img, spec, &vv.compliant_samples);
     for (std::size_t v = 0; v < nv; ++v) {
       if (!hit[v]) continue;
       measured_by[k].push_back(static_cast<std::uint32_t>(v));
@@ -168,6 +178,47 @@ Verification verify_views(const TriangleMesh& fine, const SensorModel& sensor, c
     }
     out.mv_analytic = out.views.back().cumulative_analytic;
   }
+  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return out;
+}
+
+Verification verify_images(const TriangleMesh& fine, const ModelSpec& spec, const std::vector<RangeImage>& images) {
+  const auto t0 = std::chrono::steady_clock::now();
+  Verification out;
+  const std::size_t nv = fine.vertices.size();
+  out.vertex_area_mm2.assign(nv, 0.0);
+  for (const auto& t : fine.triangles) {
+    const double a = triangle_area(fine, t) / 3.0;
+    for (int k = 0; k < 3; ++k) out.vertex_area_mm2[t[k]] += a;
+  }
+  for (double a : out.vertex_area_mm2) out.area_mm2 += a;
+  const auto vertex_normals = area_weighted_normals(fine);
+  const auto tri_normals = face_normals(fine);
+  out.measured.assign(nv, 0);
+  double cumulative = 0.0;
+  for (std::size_t k = 0; k < images.size(); ++k) {
+    for (const auto& s : images[k].samples)
+      if (s.valid() && s.triangle >= fine.triangles.size())
+        throw DataError("scan " + std::to_string(k) + ": triangle id " + std::to_string(s.triangle) +
+                        " beyond the fine model's " + std::to_string(fine.triangles.size()) + " (not a scan of this model)");
+    ViewVerification vv;
+    vv.executed = images[k].pose;
+    const auto hit = vertices_measured(fine, vertex_normals, tri_normals, images[k], spec, &vv.compliant_samples);
+    for (std::size_t v = 0; v < nv; ++v) {
+      if (!hit[v]) continue;
+      vv.alone_mm2 += out.vertex_area_mm2[v];
+      if (!out.measured[v]) {
+        out.measured[v] = 1;
+        vv.gain_mm2 += out.vertex_area_mm2[v];
+      }
+    }
+    cumulative += vv.gain_mm2;
+    vv.cumulative = out.area_mm2 > 0.0 ? cumulative / out.area_mm2 : 0.0;
+    vv.cumulative_estimated = std::nan("");
+    out.views.push_back(vv);
+  }
+  out.mv = out.views.empty() ? 0.0 : out.views.back().cumulative;
+  out.estimated = std::nan("");
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return out;
 }

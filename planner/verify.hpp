@@ -67,6 +67,11 @@ inline ScanPose scan_pose(const Viewpoint& v) {
 /// Monte Carlo over pose error (thesis fig. 7.12-7.15): the plan executed `trials` times, each with its own
 /// pose-error draw (pose_seed = mix_seed(options.pose_seed, trial)) and the same range-noise stream, so zero
 /// error reproduces the deterministic m_v exactly.
+/// Verified measurability of range images already acquired (the daemon's stored scans, simulated against
+/// this fine model): the same sample-to-vertex test as verify_views, no scanning. DataError when a sample's
+/// triangle is not one of `fine`'s.
+Verification verify_images(const TriangleMesh& fine, const ModelSpec& spec, const std::vector<RangeImage>& images);
+
 struct MonteCarloResult {
   std::vector<double> mv;  // per trial
   double mean = 0.0, sd = 0.0, min = 0.0, max = 0.0;

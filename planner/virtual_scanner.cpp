@@ -197,7 +197,7 @@ T take(const char*& p) {
 
 }  // namespace
 
-void save_range_image(const RangeImage& img, const std::filesystem::path& path) {
+std::string range_image_to_ply(const RangeImage& img) {
   static_assert(std::endian::native == std::endian::little, "range image files are little-endian");
   std::ostringstream h;
   h << "ply\nformat binary_little_endian 1.0\n";
@@ -228,6 +228,11 @@ void save_range_image(const RangeImage& img, const std::filesystem::path& path) 
       put<float>(buf, s.sigma_z_mm);
       put<std::uint32_t>(buf, s.triangle);
     }
+  return buf;
+}
+
+void save_range_image(const RangeImage& img, const std::filesystem::path& path) {
+  const std::string buf = range_image_to_ply(img);
   const std::filesystem::path tmp = path.string() + ".tmp";
   {
     std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
@@ -239,11 +244,14 @@ void save_range_image(const RangeImage& img, const std::filesystem::path& path) 
 }
 
 RangeImage load_range_image(const std::filesystem::path& path) {
-  const std::string name = path.string();
-  auto fail = [&](const std::string& why) -> void { throw DataError(name + ": " + why); };
   std::ifstream f(path, std::ios::binary);
-  if (!f) fail("cannot open file");
-  std::string data((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  if (!f) throw DataError(path.string() + ": cannot open file");
+  const std::string data((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  return range_image_from_ply(data, path.string());
+}
+
+RangeImage range_image_from_ply(const std::string& data, const std::string& name) {
+  auto fail = [&](const std::string& why) -> void { throw DataError(name + ": " + why); };
   const std::size_t end = data.find("end_header\n");
   if (data.rfind("ply\n", 0) != 0 || end == std::string::npos) fail("not a PLY file (no 'ply' / 'end_header')");
   std::istringstream header(data.substr(0, end));

@@ -10,6 +10,7 @@
 // the range z along the boresight.
 #include <cstdint>
 #include <filesystem>
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
@@ -80,6 +81,10 @@ double sample_density_per_mm2(const RangeImage& image, int i, int j);
 
 /// Binary little-endian PLY, one `vertex` per valid sample (documented in docs/range-image-format.md). The
 /// temporary-file-and-rename write means a reader never sees half a file.
+/// The range image file's bytes (docs/range-image-format.md) and back; the parser refuses damage like
+/// load_range_image, naming `name` (the daemon journals scans as these bytes).
+std::string range_image_to_ply(const RangeImage& image);
+RangeImage range_image_from_ply(const std::string& bytes, const std::string& name);
 void save_range_image(const RangeImage& image, const std::filesystem::path& path);
 /// Reads exactly what save_range_image writes; throws DataError naming the file and what is wrong.
 RangeImage load_range_image(const std::filesystem::path& path);

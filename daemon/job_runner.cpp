@@ -1,0 +1,521 @@
+#include "daemon/job_runner.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <mutex>
+#include <sstream>
+#include <thread>
+
+#include "planner/errors.hpp"
+#include "planner/mesh.hpp"
+#include "planner/verify.hpp"
+#include "planner/virtual_scanner.hpp"
+
+namespace scancell::daemon {
+namespace {
+
+using nlohmann::json;
+namespace sp = scancell::planner;
+namespace dr = scancell::drivers;
+using Clock = std::chrono::steady_clock;
+
+json matrix_json(const Eigen::Matrix4d& m) {
+  json a = json::array();
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) a.push_back(m(r, c));
+  return a;
+}
+
+Eigen::Isometry3d isometry_from(const json& a, const std::string& what) {
+  if (!a.is_array() || a.size() != 16) throw sp::DataError(what + ": needs 16 numbers");
+  Eigen::Isometry3d t;
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) t.matrix()(r, c) = a.at(static_cast<std::size_t>(4 * r + c)).get<double>();
+  return t;
+}
+
+std::string fmt(double v, int digits = 4) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.*f", digits, v);
+  return b;
+}
+
+class SimHead : public ScanHead {
+ public:
+  SimHead(const sp::SensorModel& sensor, const sp::TriangleMesh& scene, std::size_t object_triangles, std::uint64_t seed)
+      : scanner_(sensor, scene, [this] {
+          std::lock_guard<std::mutex> lock(mu_);
+          return pose_;
+        }, seed, object_triangles) {}
+  dr::DigitalOutput& trigger() override { return scanner_; }
+  dr::Scanner& scanner() override { return scanner_; }
+  void camera_at(const Eigen::Isometry3d& p) override {
+    std::lock_guard<std::mutex> lock(mu_);
+    pose_ = p;
+  }
+
+ private:
+  std::mutex mu_;
+  Eigen::Isometry3d pose_ = Eigen::Isometry3d::Identity();
+  dr::SimScanner scanner_;
+};
+
+sp::TriangleMesh load_object(const std::string& path, double fit_mm) {
+  sp::TriangleMesh m = sp::load_mesh(path);
+  if (fit_mm > 0.0) sp::apply_scale(m, sp::fit_scale(m, fit_mm));
+  return m;
+}
+
+}  // namespace
+
+std::unique_ptr<ScanHead> make_sim_head(const sp::SensorModel& sensor, const sp::TriangleMesh& scene,
+                                        std::size_t object_triangles, std::uint64_t seed) {
+  return std::make_unique<SimHead>(sensor, scene, object_triangles, seed);
+}
+
+json JobRequest::to_json() const {
+  json j = {{"mesh", mesh}};
+  if (fit_mm > 0.0) j["fit_mm"] = fit_mm;
+  if (!spec.empty()) j["spec"] = spec;
+  if (!settings.empty()) j["settings"] = settings;
+  if (!truth.empty()) j["truth"] = truth;
+  if (rough_vertices) j["rough_vertices"] = *rough_vertices;
+  return j;
+}
+
+JobRequest JobRequest::from_json(const json& j) {
+  JobRequest r;
+  r.mesh = j.at("mesh").get<std::string>();
+  r.fit_mm = j.value("fit_mm", 0.0);
+  r.spec = j.value("spec", std::string());
+  r.settings = j.value("settings", std::string());
+  r.truth = j.value("truth", std::string());
+  if (j.contains("rough_vertices")) r.rough_vertices = j["rough_vertices"].get<std::size_t>();
+  return r;
+}
+
+void validate_request(const JobRequest& r) {
+  if (r.mesh.empty()) throw std::invalid_argument("submit: 'mesh' is empty");
+  if (!(r.fit_mm >= 0.0) || !std::isfinite(r.fit_mm)) throw std::invalid_argument("submit: 'fit_mm' must be > 0");
+  if (r.rough_vertices && (*r.rough_vertices < 50 || *r.rough_vertices > 200000))
+    throw std::invalid_argument("submit: 'rough_vertices' must be in [50, 200000]");
+  load_object(r.mesh, r.fit_mm);
+  if (!r.truth.empty()) load_object(r.truth, r.fit_mm);
+  if (!r.spec.empty()) sp::load_spec(r.spec);
+  if (!r.settings.empty()) sp::load_planner_settings(r.settings);
+}
+
+struct JobRunner::Job {
+  std::int64_t id = 0;
+  JobRequest request;
+  sp::ModelSpec spec;
+  sp::PlannerSettings settings;
+  sp::RoughModelOptions rough_options;
+  sp::TriangleMesh object;          // rough model input, mm, object frame
+  std::optional<sp::RoughModel> rough;
+  std::unique_ptr<sp::MeasuredCoverage> coverage;
+  std::unique_ptr<ScanHead> head;
+  sp::CellModel cell;               // with the object's placement on the table
+  std::vector<std::uint32_t> unmeasurable;  // rows no candidate of the first plan measures
+  Progress progress;
+  int round = 0;
+  double estimated_total = 0.0;
+  double view_seconds = 0.0;        // mean executed view time this session
+  int views_timed = 0;
+  std::vector<double> planned_view_s;
+};
+
+JobRunner::JobRunner(Journal& journal, const CellModels& models, dr::Positioner& positioner, ScanHeadFactory heads,
+                     JobSettings settings, Report report)
+    : journal_(journal), models_(models), positioner_(positioner), heads_(std::move(heads)),
+      settings_(std::move(settings)), report_(std::move(report)) {
+  bool sweep = false;
+  for (const auto& a : models_.cell.axes) sweep = sweep || a.name == "sweep";
+  if (!sweep)
+    throw sp::ConfigError("cell '" + models_.cell.name + "': no 'sweep' axis; the line-scan execution needs one");
+}
+
+void JobRunner::transition(Job& j, JobState s, const std::string& cause) {
+  journal_.set_state(j.id, s, cause);
+  j.progress.state = s;
+  j.progress.event = std::string(to_string(s)) + (cause.empty() ? "" : ": " + cause);
+  report_(j.progress);
+}
+
+void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
+  json result = {{"state", to_string(state)},
+                 {"rounds", j.round + 1},
+                 {"measured_coverage", j.progress.measured},
+                 {"estimated_coverage", j.estimated_total}};
+  int views = 0;
+  std::vector<sp::RangeImage> images;
+  for (auto plan : journal_.plans(j.id))
+    for (const auto& s : journal_.scans(plan)) {
+      ++views;
+      if (state != JobState::aborted) images.push_back(sp::range_image_from_ply(journal_.read_scan(s), s.file));
+    }
+  result["views"] = views;
+  if (j.rough && j.coverage) {
+    double area = 0.0;
+    std::vector<std::uint32_t> rows = j.coverage->unmeasured_rows();
+    for (auto r : rows) area += j.rough->area_mm2[r];
+    std::vector<std::uint8_t> impossible(j.rough->size(), 0);
+    for (auto r : j.unmeasurable) impossible[r] = 1;
+    double open_area = 0.0;
+    std::size_t open = 0;
+    for (auto r : rows)
+      if (!impossible[r]) {
+        ++open;
+        open_area += j.rough->area_mm2[r];
+      }
+    result["rough_area_mm2"] = j.rough->total_area_mm2;
+    result["unmeasured_rows"] = rows.size();
+    result["unmeasured_area_mm2"] = area;
+    result["unmeasurable_rows"] = j.unmeasurable.size();  // no candidate view of this cell measures them
+    result["open_rows"] = open;                          // measurable by the plan's estimate, not measured
+    result["open_area_mm2"] = open_area;
+    // The unmeasured regions as points (object frame) for a viewer.
+    std::filesystem::create_directories(settings_.jobs_dir / std::to_string(j.id));
+    const auto path = settings_.jobs_dir / std::to_string(j.id) / "unmeasured.xyz";
+    std::ofstream f(path);
+    f << "# rough-model rows not measured to the spec: x y z (mm, object frame) nx ny nz area_mm2\n";
+    for (auto r : rows) {
+      const auto& p = j.rough->points[r];
+      const auto& n = j.rough->normals[r];
+      f << p.x() << ' ' << p.y() << ' ' << p.z() << ' ' << n.x() << ' ' << n.y() << ' ' << n.z() << ' ' << j.rough->area_mm2[r] << "\n";
+    }
+    result["unmeasured_file"] = path.string();
+  }
+  // Simulation: verified measurability of the stored scans against the object actually on the table.
+  if (state != JobState::aborted && !images.empty()) {
+    const std::string truth = j.request.truth.empty() ? j.request.mesh : j.request.truth;
+    const sp::TriangleMesh fine = load_object(truth, j.request.fit_mm);
+    const sp::Verification v = sp::verify_images(fine, j.spec, images);
+    result["verified_mv"] = v.mv;
+    result["verified_against"] = truth;
+    const auto dir = settings_.jobs_dir / std::to_string(j.id);
+    std::filesystem::create_directories(dir);
+    sp::write_measurability_png(fine, v.measured, (dir / "coverage.png").string());
+    sp::write_coverage_ply(fine, v.measured, (dir / "coverage.ply").string());
+    result["coverage_png"] = (dir / "coverage.png").string();
+    result["coverage_ply"] = (dir / "coverage.ply").string();
+  }
+  journal_.set_result(j.id, result.dump());
+  transition(j, state, cause);
+}
+
+JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
+  Job j;
+  j.id = id;
+  j.progress.job = id;
+  const JobRecord rec = journal_.job(id);
+  j.progress.state = rec.state;
+  if (finished(rec.state)) return rec.state;
+  try {
+    j.request = JobRequest::from_json(json::parse(rec.request_json));
+    j.spec = j.request.spec.empty() ? models_.spec : sp::load_spec(j.request.spec);
+    j.settings = j.request.settings.empty() ? models_.settings : sp::load_planner_settings(j.request.settings);
+    if (j.request.rough_vertices) j.rough_options.target_vertices = *j.request.rough_vertices;
+    j.rough_options.seed = j.settings.seed;
+    j.object = load_object(j.request.mesh, j.request.fit_mm);
+  } catch (const std::exception& e) {
+    j.progress.fault_kind = "job";
+    transition(j, JobState::faulted, std::string("job input: ") + e.what());
+    return JobState::faulted;
+  }
+
+  try {
+    auto plans = journal_.plans(id);
+    if (plans.empty()) {
+      transition(j, JobState::planning);
+      sp::ViewPlan p = sp::plan_views(j.object, models_.sensor, j.spec, j.settings, j.rough_options,
+                                      settings_.planner_threads, &models_.cell);
+      j.rough = p.rough;
+      j.unmeasurable = p.cover.unmeasurable_rows;
+      std::vector<std::string> poses;
+      for (std::size_t k = 0; k < p.views.size(); ++k)
+        poses.push_back(json({{"camera_to_object", matrix_json(p.views[k].transform())},
+                              {"scan_length_mm", p.views[k].scan_length_mm},
+                              {"axes", p.view_axes.at(k)},
+                              {"move_s", p.view_move_s.at(k)},
+                              {"scan_s", p.view_scan_s.at(k)}})
+                            .dump());
+      const double est = p.cover.cumulative_fraction.empty() ? 0.0 : p.cover.cumulative_fraction.back();
+      const json info = {{"round", 0},
+                         {"rows", p.rough.size()},
+                         {"object_on_table", matrix_json(p.cell->object_on_table.matrix())},
+                         {"estimated", est},
+                         {"unmeasurable_rows", j.unmeasurable},
+                         {"candidates", p.candidates},
+                         {"plan_s", p.times.total_s()}};
+      if (p.views.empty()) {
+        j.cell = *p.cell;
+        j.coverage = std::make_unique<sp::MeasuredCoverage>(*j.rough, j.spec, settings_.coverage);
+        finish(j, JobState::stalled, "the planner found no view that measures any of the rough model");
+        return JobState::stalled;
+      }
+      journal_.add_plan(id, 0, poses, info.dump());
+      plans = journal_.plans(id);
+    }
+    // The first round's info carries the placement and the rows nothing can measure in this cell.
+    const json info0 = json::parse(journal_.plan_info(plans.front()));
+    j.cell = models_.cell;
+    j.cell.object_on_table = isometry_from(info0.at("object_on_table"), "plan info object_on_table");
+    j.unmeasurable = info0.at("unmeasurable_rows").get<std::vector<std::uint32_t>>();
+    if (!j.rough) j.rough = sp::build_rough_model(j.object, j.rough_options);
+    if (j.rough->size() != info0.at("rows").get<std::size_t>())
+      throw sp::DataError("job " + std::to_string(id) + ": the rough model now has " + std::to_string(j.rough->size()) +
+                          " rows, the journalled plan " + std::to_string(info0.at("rows").get<std::size_t>()) +
+                          " (mesh file or planner changed since the job was planned)");
+    j.coverage = std::make_unique<sp::MeasuredCoverage>(*j.rough, j.spec, settings_.coverage);
+    for (auto plan : plans)
+      for (const auto& s : journal_.scans(plan)) j.coverage->add(sp::range_image_from_ply(journal_.read_scan(s), s.file));
+    j.progress.measured = j.coverage->coverage();
+
+    // What is on the table, for a simulated head: the object (ground truth) and the plate.
+    {
+      const std::string truth = j.request.truth.empty() ? j.request.mesh : j.request.truth;
+      const sp::TriangleMesh object = load_object(truth, j.request.fit_mm);
+      j.head = heads_(sp::with_fixtures(object, j.cell), object.triangles.size());
+    }
+
+    while (true) {
+      const std::int64_t plan = plans.back();
+      j.round = static_cast<int>(plans.size()) - 1;
+      j.progress.round = j.round;
+      const json info = json::parse(journal_.plan_info(plan));
+      const auto views = journal_.views(plan);
+      j.progress.views = static_cast<int>(views.size());
+      // The estimate for the whole model: measured before this round plus the round's share of the rest.
+      double measured_before = j.progress.measured;
+      j.estimated_total = j.round == 0 ? info.at("estimated").get<double>()
+                                       : info.value("estimated_total", measured_before);
+      j.progress.estimated = j.estimated_total;
+      j.planned_view_s.clear();
+      for (const auto& v : views) {
+        const json pj = json::parse(v.pose_json);
+        j.planned_view_s.push_back(pj.value("move_s", 0.0) + pj.value("scan_s", 0.0));
+      }
+      if (journal_.first_unfinished_view(plan)) {
+        const int done_views = static_cast<int>(std::count_if(views.begin(), views.end(), [](const ViewRecord& v) { return v.stored; }));
+        transition(j, JobState::executing,
+                   "round " + std::to_string(j.round) + ", " + std::to_string(views.size()) + " views" +
+                       (done_views ? ", resuming at view " + std::to_string(done_views + 1) : ""));
+        for (const auto& v : views) {
+          if (v.stored) continue;
+          const auto why = static_cast<StopRequest>(stop.load());
+          if (why != StopRequest::none) throw Interrupted(why, "before view " + std::to_string(v.index + 1));
+          execute_view(j, plan, v, stop);
+        }
+      }
+      transition(j, JobState::verifying);
+      const auto unmeasured = j.coverage->unmeasured_rows();
+      std::vector<std::uint8_t> impossible(j.rough->size(), 0);
+      for (auto r : j.unmeasurable) impossible[r] = 1;
+      std::size_t open = 0;
+      double open_area = 0.0, impossible_area = 0.0;
+      for (auto r : unmeasured) {
+        if (impossible[r]) {
+          impossible_area += j.rough->area_mm2[r];
+          continue;
+        }
+        ++open;
+        open_area += j.rough->area_mm2[r];
+      }
+      const double total = j.rough->total_area_mm2;
+      const std::string summary = "measured " + fmt(j.progress.measured) + " of the rough model; " + std::to_string(open) +
+                                  " measurable rows left (" + fmt(open_area, 1) + " mm2), " +
+                                  fmt(impossible_area, 1) + " mm2 no view in this cell can measure";
+      journal_.event(id, summary);
+      if (open == 0) {
+        finish(j, JobState::done, "spec met: " + summary);
+        return JobState::done;
+      }
+      if (j.round + 1 >= settings_.max_rounds) {
+        finish(j, JobState::stalled, "after " + std::to_string(j.round + 1) + " rounds: " + summary);
+        return JobState::stalled;
+      }
+      if (j.round > 0 && j.progress.measured <= info.value("measured_before", 0.0) + 1e-9) {
+        finish(j, JobState::stalled, "round " + std::to_string(j.round) + " measured nothing new: " + summary);
+        return JobState::stalled;
+      }
+      transition(j, JobState::replanning, std::to_string(open) + " rows left");
+      sp::PlannerSettings replan = j.settings;
+      // Later rounds go after the leftovers only; their views register to the model through the rows they
+      // share with it, not through each other, so the between-view registration constraint is dropped.
+      if (replan.cover.mode == sp::CoverMode::constrained) replan.cover.mode = sp::CoverMode::greedy;
+      auto measured = j.coverage->measured_rows();
+      for (auto r : j.unmeasurable) measured[r] = 1;  // nothing can measure them: do not chase them
+      sp::ViewPlan p = sp::plan_views(j.object, models_.sensor, j.spec, replan, j.rough_options, settings_.planner_threads,
+                                      &models_.cell, &measured);
+      if (p.views.empty()) {
+        finish(j, JobState::stalled, "replan adds nothing: " + summary);
+        return JobState::stalled;
+      }
+      std::vector<std::string> poses;
+      for (std::size_t k = 0; k < p.views.size(); ++k)
+        poses.push_back(json({{"camera_to_object", matrix_json(p.views[k].transform())},
+                              {"scan_length_mm", p.views[k].scan_length_mm},
+                              {"axes", p.view_axes.at(k)},
+                              {"move_s", p.view_move_s.at(k)},
+                              {"scan_s", p.view_scan_s.at(k)}})
+                            .dump());
+      const double est_rest = p.cover.cumulative_fraction.empty() ? 0.0 : p.cover.cumulative_fraction.back();
+      double rest_area = 0.0;
+      for (std::size_t r = 0; r < measured.size(); ++r) rest_area += measured[r] ? 0.0 : j.rough->area_mm2[r];
+      const json rinfo = {{"round", j.round + 1},
+                          {"rows", j.rough->size()},
+                          {"estimated", est_rest},
+                          {"estimated_total", j.progress.measured + est_rest * rest_area / total},
+                          {"measured_before", j.progress.measured},
+                          {"candidates", p.candidates},
+                          {"plan_s", p.times.total_s()}};
+      journal_.add_plan(id, j.round + 1, poses, rinfo.dump());
+      plans = journal_.plans(id);
+    }
+  } catch (const Interrupted& e) {
+    positioner_.halt_all();
+    if (e.why == StopRequest::abort) {
+      finish(j, JobState::aborted, std::string("by request ") + e.what());
+      return JobState::aborted;
+    }
+    if (e.why == StopRequest::pause) {
+      transition(j, JobState::paused, e.what());
+      return JobState::paused;
+    }
+    journal_.event(id, std::string("daemon stopping ") + e.what() + "; resumes at the first unfinished view");
+    j.progress.event = "interrupted (daemon stopping)";
+    report_(j.progress);
+    return j.progress.state;
+  } catch (const dr::DriverError& e) {
+    // Faulted is not an end: the job resumes at its first unfinished view once the fault is cleared.
+    positioner_.halt_all();
+    j.progress.fault_axis = e.axis;
+    j.progress.fault_kind = dr::to_string(e.kind);
+    transition(j, JobState::faulted, e.what());
+    return JobState::faulted;
+  } catch (const std::exception& e) {
+    positioner_.halt_all();
+    j.progress.fault_kind = "job";
+    transition(j, JobState::faulted, e.what());
+    return JobState::faulted;
+  }
+}
+
+void JobRunner::execute_view(Job& j, std::int64_t plan, const ViewRecord& v, const std::atomic<int>& stop) {
+  const auto t0 = Clock::now();
+  const json pj = json::parse(v.pose_json);
+  const double L = pj.at("scan_length_mm").get<double>();
+  const auto q = pj.at("axes").get<std::vector<double>>();
+  const sp::CellModel& cell = j.cell;
+  if (q.size() != cell.axes.size())
+    throw sp::DataError("plan " + std::to_string(plan) + " view " + std::to_string(v.index) + ": " + std::to_string(q.size()) +
+                        " axis targets for a cell of " + std::to_string(cell.axes.size()) + " axes");
+  const std::size_t sweep = cell.axis_index("sweep");
+  const double mid = q[sweep], start = mid - 0.5 * L, end = mid + 0.5 * L;
+  const int n_rows = models_.sensor.samples_y, n_cols = models_.sensor.samples_x;
+
+  j.progress.view = v.index + 1;
+  j.progress.event = "view " + std::to_string(v.index + 1) + "/" + std::to_string(j.progress.views) + ": moving";
+  double remaining = 0.0;
+  for (std::size_t k = static_cast<std::size_t>(v.index); k < j.planned_view_s.size(); ++k) remaining += j.planned_view_s[k];
+  if (j.views_timed > 0 && j.planned_view_s.size() > static_cast<std::size_t>(v.index))
+    remaining = j.view_seconds * static_cast<double>(j.planned_view_s.size() - static_cast<std::size_t>(v.index));
+  j.progress.eta_s = remaining;
+  report_(j.progress);
+
+  // 1. Move to the start of the sweep, every axis together.
+  std::map<std::string, double> targets;
+  for (std::size_t a = 0; a < cell.axes.size(); ++a) targets[cell.axes[a].name] = a == sweep ? start : q[a];
+  positioner_.move(targets, settings_.move_timeout);
+
+  // 2. Sweep at the scan speed; fire one profile each time the sweep passes the next profile's position
+  //    (software position compare, as a drive's position-compare output would in hardware). The pose of each
+  //    profile is the kinematics at the position read back: what the camera really did, not what was planned.
+  const double speed = settings_.scan_speed_mm_s > 0.0 ? settings_.scan_speed_mm_s : cell.scan_speed_mm_s;
+  const double pitch = L / (n_rows - 1);
+  const auto sweep_timeout = std::chrono::milliseconds(static_cast<long>(2000.0 * L / speed)) + settings_.move_timeout;
+  j.progress.event = "view " + std::to_string(v.index + 1) + "/" + std::to_string(j.progress.views) + ": scanning";
+  report_(j.progress);
+  dr::Axis& sweep_axis = positioner_.axis("sweep");
+  std::vector<double> qs = q;
+  std::vector<int> fired_rows;
+  std::vector<Eigen::Isometry3d> fired_pose;
+  int next = 0;
+  auto fire_up_to = [&](double y) {
+    // Positions come back in drive counts (1 µm): a profile is due within half a count of its place.
+    constexpr double kCount = 5e-4;
+    if (next >= n_rows || y < start + next * pitch - kCount) return;
+    // Rows passed since the last read are lost; fire for the latest one only, at the position read.
+    const int row = std::min(n_rows - 1, static_cast<int>(std::floor((y - start + kCount) / pitch)));
+    qs[sweep] = y;
+    const Eigen::Isometry3d pose = sp::forward_kinematics(cell, qs);
+    j.head->camera_at(pose);
+    j.head->trigger().set(true);
+    if (settings_.trigger_width.count() > 0) std::this_thread::sleep_for(settings_.trigger_width);
+    j.head->trigger().set(false);
+    fired_rows.push_back(row);
+    fired_pose.push_back(pose);
+    next = row + 1;
+  };
+  fire_up_to(sweep_axis.state().position);
+  positioner_.begin_move("sweep", end, speed);
+  const auto deadline = Clock::now() + sweep_timeout;
+  while (true) {
+    const auto why = static_cast<StopRequest>(stop.load());
+    if (why != StopRequest::none) {
+      sweep_axis.halt();
+      throw Interrupted(why, "during the sweep of view " + std::to_string(v.index + 1) + " (its partial scan is discarded)");
+    }
+    const dr::AxisState st = sweep_axis.state();
+    if (st.faulted) break;  // finish_move reports the drive's fault
+    fire_up_to(st.position);
+    if (!st.moving && st.in_position) break;
+    if (Clock::now() > deadline) break;  // finish_move times out with a halt
+    std::this_thread::sleep_for(std::chrono::microseconds(50));
+  }
+  sweep_axis.finish_move(end, std::chrono::milliseconds(std::max<long>(100, std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count())));
+  fire_up_to(sweep_axis.state().position);
+
+  // 3. Collect the profiles into the range image of the view (the nominal pose at mid-sweep; samples carry
+  //    their own measured positions in both frames).
+  sp::RangeImage img;
+  img.kind = models_.sensor.kind;
+  img.columns = n_cols;
+  img.rows = n_rows;
+  qs[sweep] = mid;
+  img.pose.camera_to_object = sp::forward_kinematics(cell, qs);
+  img.pose.scan_length_mm = L;
+  img.samples.assign(static_cast<std::size_t>(n_cols) * n_rows, sp::RangeSample{});
+  const Eigen::Isometry3d object_to_view = img.pose.camera_to_object.inverse();
+  for (std::size_t k = 0; k < fired_rows.size(); ++k) {
+    const dr::Profile prof = j.head->scanner().acquire(std::chrono::milliseconds(2000));
+    if (prof.samples.size() != static_cast<std::size_t>(n_cols))
+      throw dr::DriverError(dr::DriverError::Kind::protocol, "scanner", "profile " + std::to_string(prof.index),
+                            std::to_string(prof.samples.size()) + " samples, the sensor model has " + std::to_string(n_cols));
+    for (int i = 0; i < n_cols; ++i) {
+      sp::RangeSample s = prof.samples[static_cast<std::size_t>(i)];
+      if (!s.valid()) continue;
+      s.camera_mm = (object_to_view * s.object_mm.cast<double>()).cast<float>();
+      img.samples[static_cast<std::size_t>(fired_rows[k]) * n_cols + i] = s;
+    }
+  }
+  const int lost = n_rows - static_cast<int>(fired_rows.size());
+
+  // 4. Store (durable before it counts), then update the measured coverage.
+  journal_.store_scan(plan, v.index, sp::range_image_to_ply(img));
+  j.coverage->add(img);
+  j.progress.measured = j.coverage->coverage();
+  const double secs = std::chrono::duration<double>(Clock::now() - t0).count();
+  j.view_seconds = (j.view_seconds * j.views_timed + secs) / (j.views_timed + 1);
+  ++j.views_timed;
+  j.progress.eta_s = j.view_seconds * static_cast<double>(j.planned_view_s.size() - static_cast<std::size_t>(v.index) - 1);
+  j.progress.event = "view " + std::to_string(v.index + 1) + "/" + std::to_string(j.progress.views) + " stored: " +
+                     std::to_string(img.valid_count()) + " samples" + (lost ? ", " + std::to_string(lost) + " profiles missed" : "") +
+                     ", measured " + fmt(j.progress.measured) + " (" + fmt(secs, 2) + " s)";
+  journal_.event(j.id, j.progress.event);
+  report_(j.progress);
+}
+
+}  // namespace scancell::daemon

@@ -1,0 +1,127 @@
+#pragma once
+// The 3M loop of one job on the cell (thesis table 3.1): plan from the rough model, execute each view (move,
+// scan, store), update the measured coverage on the rough model from the acquired samples, verify, replan
+// for what is still unmeasured, until the spec is met (done) or a replan adds nothing (stalled).
+//
+// Every transition is journalled before the action it starts, so a job resumes after a crash, a SIGTERM or a
+// fault at its first view without a stored scan: the rough model is rebuilt from the same mesh and options
+// (deterministic), the measured coverage from the stored scans. The runner knows nothing of sockets or LCM:
+// it reports through a callback and is stopped through a flag (the daemon composes the pieces).
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "daemon/journal.hpp"
+#include "drivers/axis.hpp"
+#include "drivers/gpio.hpp"
+#include "drivers/scanner.hpp"
+#include "planner/cell.hpp"
+#include "planner/config.hpp"
+#include "planner/measured_coverage.hpp"
+#include "planner/plan.hpp"
+
+namespace scancell::daemon {
+
+/// The scanner side of the cell for one job: the trigger line and the profiles it produces. A simulated head
+/// also needs to know where the camera is at each trigger (`camera_at`, called just before the pulse).
+class ScanHead {
+ public:
+  virtual ~ScanHead() = default;
+  virtual drivers::DigitalOutput& trigger() = 0;
+  virtual drivers::Scanner& scanner() = 0;
+  virtual void camera_at(const Eigen::Isometry3d& /*camera_to_object*/) {}
+};
+
+/// Builds the head for a job. `scene_mm` is what is on the table in the object frame (the job's ground-truth
+/// mesh followed by the cell's fixtures from triangle `object_triangles` on); a real head ignores it.
+using ScanHeadFactory =
+    std::function<std::unique_ptr<ScanHead>(const planner::TriangleMesh& scene_mm, std::size_t object_triangles)>;
+
+/// A simulated head: drivers::SimScanner wired to its own trigger input, at the pose the runner reports.
+std::unique_ptr<ScanHead> make_sim_head(const planner::SensorModel& sensor, const planner::TriangleMesh& scene_mm,
+                                        std::size_t object_triangles, std::uint64_t seed);
+
+struct JobSettings {
+  int max_rounds = 4;                              // plan rounds before a job that still lacks rows stalls
+  planner::CoverageOptions coverage;               // when a rough-model row counts as measured
+  std::chrono::milliseconds move_timeout{60000};   // one positioning move
+  double scan_speed_mm_s = 0.0;                    // sweep speed; 0: the cell's scan_speed_mm_s
+  std::chrono::microseconds trigger_width{0};      // scanner trigger pulse width
+  int planner_threads = 0;
+  std::filesystem::path jobs_dir;                  // per-job outputs (coverage picture, unmeasured rows)
+};
+
+/// The models a job plans and executes with (the daemon's configuration; defaults for spec and settings).
+struct CellModels {
+  planner::CellModel cell;
+  planner::SensorModel sensor;
+  planner::ModelSpec spec;
+  planner::PlannerSettings settings;
+};
+
+/// What a submit request asks for, validated (files loaded) before the job is accepted.
+struct JobRequest {
+  std::string mesh;                    // rough model of the object (absolute path)
+  double fit_mm = 0.0;                 // scale so the longest side is this (0: the mesh is in mm)
+  std::string spec, settings;          // optional overrides (absolute paths)
+  std::string truth;                   // simulation: the object actually on the table (default: mesh)
+  std::optional<std::size_t> rough_vertices;
+  nlohmann::json to_json() const;
+  static JobRequest from_json(const nlohmann::json& j);
+};
+
+/// Loads and checks everything a request names; throws planner::MeshError/ConfigError naming the file.
+void validate_request(const JobRequest& r);
+
+struct Progress {
+  std::int64_t job = 0;
+  JobState state = JobState::queued;
+  int round = 0;
+  int view = 0, views = 0;       // 1-based view being executed, views in the round
+  double estimated = 0.0;        // planner's estimate of the whole model's measurability after this round
+  double measured = 0.0;         // measured coverage of the rough model so far
+  double eta_s = 0.0;            // remaining time of the round, s
+  std::string event;             // what just happened (empty for a plain progress tick)
+  std::string fault_axis, fault_kind;  // set with state faulted: the axis (if any) and DriverError kind or "job"
+};
+
+enum class StopRequest : int { none = 0, pause = 1, abort = 2, shutdown = 3 };
+
+class JobRunner {
+ public:
+  using Report = std::function<void(const Progress&)>;
+  JobRunner(Journal& journal, const CellModels& models, drivers::Positioner& positioner, ScanHeadFactory heads,
+            JobSettings settings, Report report);
+
+  /// Runs or resumes `job` until it is done, stalled, aborted or faulted, or `stop` asks it to pause or to let
+  /// the daemon shut down (then the job stays resumable). Returns the state the job is left in.
+  JobState run(std::int64_t job, const std::atomic<int>& stop);
+
+ private:
+  struct Job;
+  void execute_view(Job& j, std::int64_t plan, const ViewRecord& v, const std::atomic<int>& stop);
+  void finish(Job& j, JobState state, const std::string& cause);
+  void transition(Job& j, JobState s, const std::string& cause = "");
+
+  Journal& journal_;
+  const CellModels& models_;
+  drivers::Positioner& positioner_;
+  ScanHeadFactory heads_;
+  JobSettings settings_;
+  Report report_;
+};
+
+/// A stop request honoured at a safe point (between moves or profiles).
+struct Interrupted : std::runtime_error {
+  StopRequest why;
+  Interrupted(StopRequest w, const std::string& what) : std::runtime_error(what), why(w) {}
+};
+
+}  // namespace scancell::daemon
