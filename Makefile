@@ -5,7 +5,7 @@ JOBS       ?= $(shell nproc)
 CMAKE      ?= cmake
 SCANCELL    = $(BUILD)/tools/scancell
 
-.PHONY: all deps build test test-asan demo bench quality clean
+.PHONY: all deps build test test-asan demo demo-offline kill-test bench quality clean
 
 all: build
 
@@ -22,6 +22,10 @@ test: build
 	ctest --test-dir $(BUILD) --output-on-failure -j$(JOBS)
 	@$(MAKE) --no-print-directory test-asan
 
+# The longer crash-safety run: kill -9 the daemon 50 times during jobs (CI runs 20 in make test).
+kill-test: build
+	tests/daemon/kill_loop.sh $(BUILD) 50
+
 test-asan: deps
 	@$(CMAKE) -S . -B $(ASAN_BUILD) -DCMAKE_BUILD_TYPE=Debug "-DCMAKE_CXX_FLAGS_DEBUG=-O1 -g" -DSCANCELL_SANITIZE=ON -DSCANCELL_BUILD_BENCH=OFF > $(ASAN_BUILD).configure.log 2>&1 || (cat $(ASAN_BUILD).configure.log; exit 1)
 	@$(CMAKE) --build $(ASAN_BUILD) -j$(JOBS) --target planner_tests driver_tests daemon_tests
@@ -31,6 +35,10 @@ test-asan: deps
 # Until the daemon exists: plan the bundled example object, then execute the plan with the virtual scanner
 # on the fine model (verified measurability, coverage mesh and projection image).
 demo: build
+	scripts/demo.sh $(BUILD)
+
+# The planner and verifier alone, offline: a plan file, its verification report and coverage pictures.
+demo-offline: build
 	$(SCANCELL) plan --mesh tests/data/mushroom.off --fit-mm 200 \
 	  --sensor config/sensors/line-scan-thesis.yaml --spec config/spec/thesis.yaml \
 	  --settings config/planner/default.yaml --out $(BUILD)/demo-plan.json

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <map>
+#include <thread>
 
 #include "drivers/canopen_axis.hpp"
 #include "drivers/modbus_axis.hpp"
@@ -66,6 +67,17 @@ void bring_up(CellIo& io, const sp::CellModel& cell, std::chrono::milliseconds t
   for (const auto& a : cell.axes) {
     dr::Axis& axis = io.positioner.axis(a.name);
     dr::AxisState s = axis.state();
+    // A daemon that died mid-move left the drive finishing that move: stop it and wait for standstill
+    // before anything else is commanded.
+    if (s.moving) {
+      axis.stop();
+      const auto deadline = std::chrono::steady_clock::now() + timeout;
+      while ((s = axis.state()).moving) {
+        if (std::chrono::steady_clock::now() > deadline)
+          throw dr::DriverError(dr::DriverError::Kind::motion_timeout, a.name, "start-up", "still moving after a stop");
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+      }
+    }
     if (s.faulted) axis.reset_fault();
     axis.enable();
     if (!axis.state().homed) axis.home(timeout);

@@ -28,8 +28,8 @@ struct CellIo {
 std::unique_ptr<CellIo> open_cell_io(const planner::CellModel& cell, const drivers::DriverSetup& setup,
                                      const std::string& drivers_file);
 
-/// Enables every axis, homes those that are not homed (a restarted daemon finds its drives homed), then
-/// parks the cell at its home position.
+/// Stops an axis still finishing a move commanded before a crash, enables every axis, homes those that are
+/// not homed (a restarted daemon finds its drives homed), then parks the cell at its home position.
 void bring_up(CellIo& io, const planner::CellModel& cell, std::chrono::milliseconds timeout);
 
 /// Moves every axis to the cell's home (SIGTERM, end of job).

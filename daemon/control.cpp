@@ -26,7 +26,8 @@ struct Field {
 const std::map<std::string, std::map<std::string, Field>>& schema() {
   static const std::map<std::string, std::map<std::string, Field>> s = {
       {"submit", {{"mesh", {Type::string, true}}, {"spec", {Type::string, false}}, {"settings", {Type::string, false}},
-                  {"fit_mm", {Type::number, false}}}},
+                  {"fit_mm", {Type::number, false}}, {"truth", {Type::string, false}},
+                  {"rough_vertices", {Type::integer, false}}}},
       {"status", {{"job", {Type::integer, false}}}},
       {"list", {}},
       {"watch", {{"job", {Type::integer, true}}}},
@@ -122,7 +123,7 @@ ControlServer::~ControlServer() {
   if (thread_.joinable()) thread_.join();
   {
     std::lock_guard<std::mutex> lock(clients_mu_);
-    for (auto& c : clients_) c.join();
+    for (auto& c : clients_) c.thread.join();
   }
   ::close(listen_fd_);
   ::unlink(path_.c_str());
@@ -135,7 +136,20 @@ void ControlServer::accept_loop() {
     const int c = ::accept(listen_fd_, nullptr, nullptr);
     if (c < 0) continue;
     std::lock_guard<std::mutex> lock(clients_mu_);
-    clients_.emplace_back([this, c] { serve(c); });
+    for (auto it = clients_.begin(); it != clients_.end();) {
+      if (*it->done) {
+        it->thread.join();
+        it = clients_.erase(it);
+      } else {
+        ++it;
+      }
+    }
+    auto done = std::make_shared<std::atomic<bool>>(false);
+    clients_.push_back({std::thread([this, c, done] {
+                          serve(c);
+                          *done = true;
+                        }),
+                        done});
   }
 }
 
@@ -171,7 +185,10 @@ void ControlServer::serve(int fd) {
       json reply;
       try {
         const json req = parse_request(line);
-        reply = handler_(req, [&](const json& event) { open = open && send_line(fd, event); });
+        reply = handler_(req, [&](const json& event) {
+          open = open && send_line(fd, event);
+          return open;
+        });
         reply["ok"] = true;
       } catch (const std::invalid_argument& e) {
         ++refused_;

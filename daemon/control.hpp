@@ -5,7 +5,8 @@
 // naming what is wrong; the server keeps running.
 //
 // Commands and fields (required unless marked optional):
-//   submit   mesh (string), spec (string, optional), settings (string, optional), fit_mm (number, optional)
+//   submit   mesh (string), spec (string, optional), settings (string, optional), fit_mm (number, optional),
+//            truth (string, optional; simulation: the object actually on the table), rough_vertices (integer, optional)
 //   status   job (integer, optional)
 //   list     —
 //   watch    job (integer)            — the reply is followed by event lines until the job ends
@@ -14,6 +15,7 @@
 #include <atomic>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -31,9 +33,10 @@ inline constexpr std::size_t kMaxRequestBytes = 64 * 1024;
 class ControlServer {
  public:
   /// `handler` answers a valid request with the reply object (without "ok"; it is added). For `watch`, the
-  /// handler may call `send` repeatedly before returning to stream events.
+  /// handler may call `send` repeatedly before returning to stream events; `send` returns false once the
+  /// client has gone (the handler should then return).
   using Handler = std::function<nlohmann::json(const nlohmann::json& request,
-                                               const std::function<void(const nlohmann::json&)>& send)>;
+                                               const std::function<bool(const nlohmann::json&)>& send)>;
   ControlServer(std::filesystem::path socket_path, Handler handler, const std::string& group = "");
   ~ControlServer();
   ControlServer(const ControlServer&) = delete;
@@ -51,7 +54,13 @@ class ControlServer {
   std::atomic<std::size_t> refused_{0};
   std::thread thread_;
   std::mutex clients_mu_;
-  std::vector<std::thread> clients_;
+  // One thread per connected client; finished ones are joined as new clients arrive (a daemon that runs for
+  // weeks must not collect threads).
+  struct Client {
+    std::thread thread;
+    std::shared_ptr<std::atomic<bool>> done;
+  };
+  std::vector<Client> clients_;
 };
 
 }  // namespace scancell::daemon

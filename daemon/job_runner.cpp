@@ -287,6 +287,7 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
       const json info = json::parse(journal_.plan_info(plan));
       const auto views = journal_.views(plan);
       j.progress.views = static_cast<int>(views.size());
+      j.progress.view = 0;
       // The estimate for the whole model: measured before this round plus the round's share of the rest.
       double measured_before = j.progress.measured;
       j.estimated_total = j.round == 0 ? info.at("estimated").get<double>()

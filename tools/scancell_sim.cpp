@@ -1,10 +1,13 @@
 // scancell-sim: the cell's drives, served over the real protocols for the daemon, the demo and manual tests.
-//   scancell-sim modbus (--tcp PORT | --rtu) [--fault F]
+//   scancell-sim modbus (--tcp PORT [--drives N] | --rtu) [--fault F] [--max-velocity COUNTS_S] [--accel COUNTS_S2]
+//                       [--no-stdin]
 //   scancell-sim can --unix PATH [--node N]
-// Serves one simulated Modbus drive (docs/modbus-register-map.md) on 127.0.0.1:PORT, or on a new
-// pseudo-terminal with --rtu (its path is printed). Faults can be chosen at start (--fault) or at run time by
-// writing a fault name to standard input: none, no_reply, illegal_address, busy_once, device_failure, stall,
-// drop_connection, following_error, corrupt_once (RTU: a reply with a wrong CRC).
+// Serves simulated Modbus drives (docs/modbus-register-map.md): N of them on 127.0.0.1:PORT ... PORT+N-1 (one
+// per port, as a cell's drives each have their own address), or one on a new pseudo-terminal with --rtu (its
+// path is printed). Faults can be chosen at start (--fault, every drive) or at run time by writing "FAULT" (drive
+// 0) or "K FAULT" (drive K) to standard input: none, no_reply, illegal_address, busy_once, device_failure,
+// stall, drop_connection, following_error, corrupt_once (RTU: a reply with a wrong CRC). --no-stdin: run until
+// SIGINT/SIGTERM whatever standard input does (background use, the demo).
 // `can` serves one simulated CiA 402 drive (node N, default 1) on a SOCK_SEQPACKET Unix socket at PATH carrying
 // struct can_frame records (the drivers' CanLink::open("unix:PATH")); faults from standard input: none,
 // sdo_abort_once, missing_heartbeat, drive_fault, following_error, bus_off. Runs until standard input closes
@@ -16,6 +19,7 @@
 #include <memory>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include <poll.h>
 #include <sys/socket.h>
@@ -54,7 +58,8 @@ const std::map<std::string, sim::CanFault> kCanFaults = {
 
 int usage() {
   std::cerr << "usage: scancell-sim can --unix PATH [--node N]\n";
-  std::cerr << "usage: scancell-sim modbus (--tcp PORT | --rtu) [--fault F]\n  faults:";
+  std::cerr << "usage: scancell-sim modbus (--tcp PORT [--drives N] | --rtu) [--fault F] [--max-velocity COUNTS_S] "
+               "[--accel COUNTS_S2] [--no-stdin]\n  faults:";
   for (const auto& [n, f] : kFaults) std::cerr << ' ' << n;
   std::cerr << "\n";
   return 2;
@@ -117,9 +122,19 @@ int serve_can(int argc, char** argv) {
 int main(int argc, char** argv) {
   if (argc >= 2 && std::strcmp(argv[1], "can") == 0) return serve_can(argc, argv);
   if (argc < 2 || std::strcmp(argv[1], "modbus") != 0) return usage();
-  int port = 0;
-  bool rtu = false;
+  int port = 0, drives = 1;
+  bool rtu = false, use_stdin = true;
+  sim::DriveParams params;
   sim::ModbusFault fault = sim::ModbusFault::none;
+  auto number = [&](int& i, const char* what) -> double {
+    char* end = nullptr;
+    const double v = std::strtod(argv[++i], &end);
+    if (*end || !(v > 0.0)) {
+      std::cerr << "scancell-sim: " << what << ": '" << argv[i] << "' is not a positive number\n";
+      std::exit(2);
+    }
+    return v;
+  };
   for (int i = 2; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--tcp" && i + 1 < argc) {
@@ -129,6 +144,18 @@ int main(int argc, char** argv) {
         std::cerr << "scancell-sim: --tcp: '" << argv[i] << "' is not a port\n";
         return 2;
       }
+    } else if (a == "--drives" && i + 1 < argc) {
+      drives = static_cast<int>(number(i, "--drives"));
+      if (drives < 1 || drives > 32) {
+        std::cerr << "scancell-sim: --drives must be in [1, 32]\n";
+        return 2;
+      }
+    } else if (a == "--max-velocity" && i + 1 < argc) {
+      params.max_velocity_counts_s = number(i, "--max-velocity");
+    } else if (a == "--accel" && i + 1 < argc) {
+      params.accel_counts_s2 = number(i, "--accel");
+    } else if (a == "--no-stdin") {
+      use_stdin = false;
     } else if (a == "--rtu") {
       rtu = true;
     } else if (a == "--fault" && i + 1 < argc) {
@@ -144,31 +171,57 @@ int main(int argc, char** argv) {
     }
   }
   if (!rtu && port == 0) return usage();
+  if (rtu && drives != 1) {
+    std::cerr << "scancell-sim: --drives is for --tcp\n";
+    return 2;
+  }
   std::signal(SIGINT, on_signal);
   std::signal(SIGTERM, on_signal);
-  sim::ModbusDriveSim drive;
-  drive.inject(fault);
+  std::vector<std::unique_ptr<sim::ModbusDriveSim>> drive;
   try {
-    if (rtu) std::cout << "scancell-sim: Modbus RTU on " << drive.serve_rtu() << std::endl;
-    else std::cout << "scancell-sim: Modbus TCP on 127.0.0.1:" << drive.serve_tcp(port) << std::endl;
+    for (int k = 0; k < drives; ++k) {
+      drive.push_back(std::make_unique<sim::ModbusDriveSim>(params));
+      drive.back()->inject(fault);
+      if (rtu) {
+        std::cout << "scancell-sim: Modbus RTU on " << drive.back()->serve_rtu() << std::endl;
+      } else {
+        const int got = drive.back()->serve_tcp(port + k);
+        if (got != port + k) throw std::runtime_error("port " + std::to_string(port + k) + " is taken");
+        std::cout << "scancell-sim: Modbus TCP drive " << k << " on 127.0.0.1:" << got << std::endl;
+      }
+    }
   } catch (const std::exception& e) {
     std::cerr << "scancell-sim: " << e.what() << "\n";
     return 1;
   }
   std::string line;
   while (!g_stop) {
+    if (!use_stdin) {
+      ::poll(nullptr, 0, 100);
+      continue;
+    }
     pollfd p{0, POLLIN, 0};
     if (::poll(&p, 1, 100) <= 0) continue;
     if (!std::getline(std::cin, line)) break;
-    auto it = kFaults.find(line);
-    if (it == kFaults.end()) {
-      std::cerr << "scancell-sim: unknown fault '" << line << "'\n";
+    std::size_t k = 0;
+    std::string name = line;
+    if (const auto sp = line.find(' '); sp != std::string::npos) {
+      k = static_cast<std::size_t>(std::atoi(line.substr(0, sp).c_str()));
+      name = line.substr(sp + 1);
+    }
+    auto it = kFaults.find(name);
+    if (it == kFaults.end() || k >= drive.size()) {
+      std::cerr << "scancell-sim: unknown fault or drive '" << line << "'\n";
       continue;
     }
-    drive.inject(it->second);
-    std::cout << "scancell-sim: fault " << line << std::endl;
+    drive[k]->inject(it->second);
+    std::cout << "scancell-sim: drive " << k << " fault " << name << std::endl;
   }
-  std::cout << "scancell-sim: " << drive.commands().size() << " commands served, " << drive.limit_violations()
-            << " limit violations" << std::endl;
-  return drive.limit_violations() == 0 ? 0 : 1;
+  std::size_t commands = 0, violations = 0;
+  for (const auto& d : drive) {
+    commands += d->commands().size();
+    violations += d->limit_violations();
+  }
+  std::cout << "scancell-sim: " << commands << " commands served, " << violations << " limit violations" << std::endl;
+  return violations == 0 ? 0 : 1;
 }

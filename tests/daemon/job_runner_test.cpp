@@ -116,7 +116,9 @@ TEST_F(SimCell, CubeJobMeasuresEverythingTheCellCanMeasure) {
   EXPECT_NEAR(result["verified_mv"].get<double>(), 5.0 / 6.0, 0.04);
   EXPECT_GT(result["unmeasurable_rows"].get<int>(), 0);
   EXPECT_LT(result["open_area_mm2"].get<double>(), 0.01 * result["rough_area_mm2"].get<double>());
-  if (end == JobState::done) EXPECT_EQ(result["open_rows"].get<int>(), 0);
+  if (end == JobState::done) {
+    EXPECT_EQ(result["open_rows"].get<int>(), 0);
+  }
   EXPECT_TRUE(fs::exists(result["coverage_png"].get<std::string>()));
   for (auto p : journal->plans(job)) EXPECT_FALSE(journal->first_unfinished_view(p).has_value());
   EXPECT_EQ(stored_views(job), static_cast<std::size_t>(result["views"].get<int>()));

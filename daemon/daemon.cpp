@@ -1,0 +1,368 @@
+#include "daemon/daemon.hpp"
+
+#include <csignal>
+#include <iostream>
+
+#include <signal.h>
+
+#include "planner/errors.hpp"
+
+namespace scancell::daemon {
+
+using nlohmann::json;
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+
+namespace {
+
+bool runnable(JobState s) {
+  return s == JobState::queued || s == JobState::planning || s == JobState::executing || s == JobState::verifying ||
+         s == JobState::replanning;
+}
+
+bool ends_watch(JobState s) { return finished(s) || s == JobState::faulted || s == JobState::paused; }
+
+std::string absolute_file(const json& req, const char* key) {
+  if (!req.contains(key)) return "";
+  const std::string p = req[key].get<std::string>();
+  if (p.empty() || p[0] != '/')
+    throw std::invalid_argument(std::string("submit: '") + key + "' must be an absolute path (the daemon's working directory is not yours), got '" + p + "'");
+  return p;
+}
+
+}  // namespace
+
+Daemon::Daemon(DaemonConfig config) : config_(std::move(config)) {
+  journal_ = std::make_unique<Journal>(config_.data_dir);
+  telemetry_ = std::make_unique<Telemetry>(config_.lcm_url);
+  io_ = open_cell_io(config_.models.cell, config_.drivers, config_.drivers_file.string());
+  bring_up(*io_, config_.models.cell, config_.home_timeout);
+  fs::create_directories(config_.socket_path.parent_path());
+  control_ = std::make_unique<ControlServer>(
+      config_.socket_path, [this](const json& r, const std::function<bool(const json&)>& send) { return handle(r, send); },
+      config_.socket_group);
+  job_thread_ = std::thread([this] { job_loop(); });
+}
+
+Daemon::~Daemon() {
+  running_ = false;
+  stop_ = static_cast<int>(StopRequest::shutdown);
+  wake_.notify_all();
+  events_cv_.notify_all();
+  if (job_thread_.joinable()) job_thread_.join();
+  control_.reset();
+}
+
+std::optional<std::int64_t> Daemon::next_runnable() {
+  for (const auto& j : journal_->unfinished_jobs())
+    if (runnable(j.state)) return j.id;
+  return std::nullopt;
+}
+
+void Daemon::job_loop() {
+  while (running_) {
+    const auto id = next_runnable();
+    bool hardware_ok = true;
+    for (const auto& n : io_->positioner.names()) hardware_ok = hardware_ok && !io_->positioner.axis(n).state().faulted;
+    hardware_ok = hardware_ok && !io_->positioner.estop_latched();
+    if (!id || !hardware_ok) {
+      std::unique_lock<std::mutex> lock(wake_mu_);
+      wake_.wait_for(lock, 500ms);
+      continue;
+    }
+    CellModels models;
+    {
+      std::lock_guard<std::mutex> lock(config_mu_);
+      models = config_.models;
+    }
+    const std::uint64_t seed = config_.scanner_seed;
+    auto heads = [&models, seed](const planner::TriangleMesh& scene, std::size_t object_triangles) {
+      return make_sim_head(models.sensor, scene, object_triangles, seed);
+    };
+    JobRunner runner(*journal_, models, io_->positioner, heads, config_.jobs, [this](const Progress& p) { report(p); });
+    stop_ = 0;
+    current_ = *id;
+    notifier_.status("job " + std::to_string(*id) + " running");
+    const JobState end = runner.run(*id, stop_);
+    current_ = 0;
+    notifier_.status("idle (job " + std::to_string(*id) + " " + to_string(end) + ")");
+    if (running_ && finished(end)) {
+      try {
+        park(*io_, models.cell, config_.jobs.move_timeout);
+      } catch (const std::exception& e) {
+        journal_->event(*id, std::string("park after the job failed: ") + e.what());
+      }
+    }
+    publish_status();
+  }
+}
+
+json Daemon::progress_json(const Progress& p) const {
+  return {{"job", p.job},          {"state", to_string(p.state)}, {"round", p.round},
+          {"view", p.view},        {"views", p.views},            {"estimated_coverage", p.estimated},
+          {"measured_coverage", p.measured}, {"eta_s", p.eta_s},   {"event", p.event}};
+}
+
+void Daemon::report(const Progress& p) {
+  {
+    std::lock_guard<std::mutex> lock(events_mu_);
+    events_.emplace_back(next_seq_++, p);
+    while (events_.size() > 4096) events_.pop_front();
+    last_ = p;
+  }
+  events_cv_.notify_all();
+  std::lock_guard<std::mutex> lock(telemetry_mu_);
+  if (!p.event.empty()) telemetry_->progress(p.job, p.event);
+  if (p.state == JobState::faulted && p.event.rfind("faulted", 0) == 0) {
+    scancell::fault_t f{};
+    f.job_id = p.job;
+    f.axis = p.fault_axis;
+    f.kind = p.fault_kind;
+    f.text = p.event;
+    telemetry_->fault(f);
+  }
+  if (p.state == JobState::executing && p.event.rfind("executing", 0) == 0) {
+    // The round's plan as it will be executed.
+    scancell::plan_t m{};
+    m.job_id = p.job;
+    m.round = p.round;
+    if (const auto plan = journal_->latest_plan(p.job))
+      for (const auto& v : journal_->views(*plan)) {
+        const json pj = json::parse(v.pose_json);
+        std::vector<double> t = pj.at("camera_to_object").get<std::vector<double>>();
+        m.camera_to_object.push_back(t);
+        m.scan_length_mm.push_back(pj.at("scan_length_mm").get<double>());
+      }
+    telemetry_->plan(m);
+  }
+  scancell::status_t s{};
+  s.daemon_state = p.state == JobState::faulted ? "faulted" : "busy";
+  s.job_id = p.job;
+  s.job_state = to_string(p.state);
+  s.view = p.view;
+  s.views = p.views;
+  s.estimated_coverage = p.estimated;
+  s.measured_coverage = p.measured;
+  telemetry_->status(s);
+}
+
+void Daemon::publish_status() {
+  Progress p;
+  {
+    std::lock_guard<std::mutex> lock(events_mu_);
+    p = last_;
+  }
+  scancell::status_t s{};
+  const std::int64_t cur = current_;
+  s.daemon_state = !running_ ? "stopping" : cur ? "busy" : io_->positioner.estop_latched() ? "faulted" : "idle";
+  s.job_id = cur ? cur : 0;
+  s.job_state = cur ? to_string(p.state) : "";
+  s.view = cur ? p.view : 0;
+  s.views = cur ? p.views : 0;
+  s.estimated_coverage = cur ? p.estimated : 0.0;
+  s.measured_coverage = cur ? p.measured : 0.0;
+  std::lock_guard<std::mutex> lock(telemetry_mu_);
+  telemetry_->status(s);
+}
+
+void Daemon::publish_axes() {
+  scancell::axis_state_t m{};
+  for (const auto& n : io_->positioner.names()) {
+    drivers::AxisState st;
+    try {
+      st = io_->positioner.axis(n).state();
+    } catch (const drivers::DriverError& e) {
+      st.faulted = true;
+      st.fault_code = 0xFFFF;
+    }
+    m.name.push_back(n);
+    m.position.push_back(st.position);
+    m.moving.push_back(st.moving);
+    m.fault.push_back(static_cast<std::int16_t>(st.faulted ? (st.fault_code ? st.fault_code : 1) : 0));
+  }
+  std::lock_guard<std::mutex> lock(telemetry_mu_);
+  telemetry_->axes(m);
+}
+
+json Daemon::handle(const json& req, const std::function<bool(const json&)>& send) {
+  const std::string cmd = req["cmd"];
+  if (cmd == "submit") {
+    JobRequest r;
+    r.mesh = absolute_file(req, "mesh");
+    r.spec = absolute_file(req, "spec");
+    r.settings = absolute_file(req, "settings");
+    r.truth = absolute_file(req, "truth");
+    r.fit_mm = req.value("fit_mm", 0.0);
+    if (req.contains("rough_vertices")) {
+      const auto n = req["rough_vertices"].get<std::int64_t>();
+      if (n < 50 || n > 200000) throw std::invalid_argument("submit: 'rough_vertices' must be in [50, 200000]");
+      r.rough_vertices = static_cast<std::size_t>(n);
+    }
+    try {
+      validate_request(r);
+    } catch (const planner::MeshError& e) {
+      throw std::invalid_argument(std::string("submit: mesh refused: ") + e.what());
+    } catch (const planner::ConfigError& e) {
+      throw std::invalid_argument(std::string("submit: config refused: ") + e.what());
+    }
+    const std::int64_t id = journal_->create_job(r.mesh, r.to_json().dump());
+    wake_.notify_all();
+    return {{"job", id}, {"state", "queued"}};
+  }
+  auto job_of = [&]() -> JobRecord {
+    const std::int64_t id = req["job"].get<std::int64_t>();
+    try {
+      return journal_->job(id);
+    } catch (const JournalError&) {
+      throw std::invalid_argument(cmd + ": no job " + std::to_string(id));
+    }
+  };
+  auto job_json = [&](const JobRecord& j) {
+    json o = {{"job", j.id}, {"state", to_string(j.state)}, {"mesh", j.mesh_path}, {"cause", j.cause}};
+    if (!j.result_json.empty()) o["result"] = json::parse(j.result_json);
+    return o;
+  };
+  if (cmd == "status") {
+    if (req.contains("job")) {
+      const JobRecord j = job_of();
+      json o = job_json(j);
+      std::lock_guard<std::mutex> lock(events_mu_);
+      if (last_.job == j.id) o["progress"] = progress_json(last_);
+      return o;
+    }
+    const std::int64_t cur = current_;
+    json o = {{"daemon", cur ? "busy" : "idle"}, {"job", cur}};
+    std::lock_guard<std::mutex> lock(events_mu_);
+    if (cur && last_.job == cur) o["progress"] = progress_json(last_);
+    return o;
+  }
+  if (cmd == "list") {
+    json a = json::array();
+    for (const auto& j : journal_->jobs(100)) a.push_back(job_json(j));
+    return {{"jobs", a}};
+  }
+  if (cmd == "watch") {
+    const JobRecord j = job_of();
+    std::uint64_t seen = 0;
+    {
+      std::lock_guard<std::mutex> lock(events_mu_);
+      seen = next_seq_ - 1;
+      if (last_.job == j.id) send(progress_json(last_));
+    }
+    JobState state = j.state;
+    while (running_ && !ends_watch(state)) {
+      std::vector<Progress> fresh;
+      {
+        std::unique_lock<std::mutex> lock(events_mu_);
+        events_cv_.wait_for(lock, 250ms, [&] { return !running_ || (!events_.empty() && events_.back().first > seen); });
+        for (const auto& [seq, p] : events_)
+          if (seq > seen) {
+            seen = seq;
+            if (p.job == j.id) fresh.push_back(p);
+          }
+      }
+      for (const auto& p : fresh)
+        if (!send(progress_json(p))) return {{"job", j.id}, {"state", to_string(state)}};
+      state = journal_->job(j.id).state;
+    }
+    return job_json(journal_->job(j.id));
+  }
+  if (cmd == "pause" || cmd == "abort") {
+    const JobRecord j = job_of();
+    if (current_ == j.id) {
+      stop_ = static_cast<int>(cmd == "pause" ? StopRequest::pause : StopRequest::abort);
+      return {{"job", j.id}, {"state", to_string(j.state)}, {"note", cmd + " at the next safe point (between moves or profiles)"}};
+    }
+    if (finished(j.state)) throw std::invalid_argument(cmd + ": job " + std::to_string(j.id) + " is already " + to_string(j.state));
+    if (cmd == "pause" && j.state != JobState::queued)
+      throw std::invalid_argument("pause: job " + std::to_string(j.id) + " is " + to_string(j.state) + ", not queued or running");
+    journal_->set_state(j.id, cmd == "pause" ? JobState::paused : JobState::aborted, "by request");
+    report({j.id, cmd == "pause" ? JobState::paused : JobState::aborted, 0, 0, 0, 0, 0, 0, std::string(cmd == "pause" ? "paused" : "aborted") + ": by request", "", ""});
+    return {{"job", j.id}, {"state", cmd == "pause" ? "paused" : "aborted"}};
+  }
+  if (cmd == "resume") {
+    const JobRecord j = job_of();
+    if (j.state != JobState::paused && j.state != JobState::faulted)
+      throw std::invalid_argument("resume: job " + std::to_string(j.id) + " is " + to_string(j.state) + ", not paused or faulted");
+    if (j.state == JobState::faulted) {
+      if (current_ != 0) throw std::invalid_argument("resume: job " + std::to_string(current_.load()) + " is running; resume the faulted job after it");
+      // The operator's resume is the authority to clear drive faults and the e-stop latch.
+      if (io_->interlock) io_->interlock->reset();  // refused while the e-stop is still pressed
+      else io_->positioner.reset_estop();
+      bring_up(*io_, config_.models.cell, config_.home_timeout);
+    }
+    journal_->set_state(j.id, JobState::queued, "resumed");
+    wake_.notify_all();
+    return {{"job", j.id}, {"state", "queued"}};
+  }
+  if (cmd == "reload") {
+    std::lock_guard<std::mutex> lock(config_mu_);
+    std::vector<std::string> changes;
+    try {
+      changes = reload_calibration(config_);
+    } catch (const planner::ConfigError& e) {
+      throw std::invalid_argument(std::string("reload refused, the previous calibration stays in force: ") + e.what());
+    }
+    std::lock_guard<std::mutex> tl(telemetry_mu_);
+    telemetry_->progress(0, changes.empty() ? "reload: no change" : "reload: " + std::to_string(changes.size()) + " changes");
+    return {{"changes", changes}, {"applies_to", "jobs started from now on"}};
+  }
+  throw std::invalid_argument("unknown command '" + cmd + "'");
+}
+
+int Daemon::run() {
+  sigset_t set;
+  sigemptyset(&set);
+  sigaddset(&set, SIGTERM);
+  sigaddset(&set, SIGINT);
+  sigaddset(&set, SIGHUP);
+  notifier_.ready("scancelld ready: " + config_.socket_path.string());
+  std::cerr << "scancelld: ready; control socket " << config_.socket_path << ", data " << config_.data_dir << ", LCM "
+            << config_.lcm_url << std::endl;
+  auto last_status = std::chrono::steady_clock::now() - 1h, last_axes = last_status, last_dog = last_status;
+  const auto dog = notifier_.watchdog_period() / 2;
+  while (true) {
+    timespec ts{0, 50 * 1000 * 1000};
+    const int sig = ::sigtimedwait(&set, nullptr, &ts);
+    if (sig == SIGTERM || sig == SIGINT) break;
+    if (sig == SIGHUP) {
+      try {
+        const json r = handle({{"cmd", "reload"}}, [](const json&) { return true; });
+        std::cerr << "scancelld: SIGHUP reload: " << r["changes"].dump() << std::endl;
+      } catch (const std::exception& e) {
+        std::cerr << "scancelld: SIGHUP reload refused: " << e.what() << std::endl;
+      }
+    }
+    const auto now = std::chrono::steady_clock::now();
+    if (dog.count() > 0 && now - last_dog >= dog) {
+      notifier_.watchdog();
+      last_dog = now;
+    }
+    if (now - last_status >= 1s) {
+      publish_status();
+      last_status = now;
+    }
+    if (now - last_axes >= 200ms) {
+      publish_axes();
+      last_axes = now;
+    }
+  }
+  std::cerr << "scancelld: stopping at the next safe point" << std::endl;
+  notifier_.stopping("stopping: finishing the current move or profile, then parking");
+  running_ = false;
+  stop_ = static_cast<int>(StopRequest::shutdown);
+  wake_.notify_all();
+  events_cv_.notify_all();
+  if (job_thread_.joinable()) job_thread_.join();
+  try {
+    park(*io_, config_.models.cell, config_.jobs.move_timeout);
+  } catch (const std::exception& e) {
+    std::cerr << "scancelld: park failed: " << e.what() << std::endl;
+  }
+  control_.reset();
+  journal_.reset();
+  std::cerr << "scancelld: stopped" << std::endl;
+  return 0;
+}
+
+}  // namespace scancell::daemon

@@ -1,0 +1,122 @@
+#include "daemon/daemon_config.hpp"
+
+#include <fstream>
+#include <sstream>
+
+#include "planner/yaml_section.hpp"
+
+namespace scancell::daemon {
+
+namespace sp = scancell::planner;
+namespace fs = std::filesystem;
+
+namespace {
+
+fs::path relative_to(const fs::path& base, const std::string& p) {
+  const fs::path q(p);
+  return q.is_absolute() ? q : fs::absolute(base.parent_path() / q).lexically_normal();
+}
+
+
+}  // namespace
+
+DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_dir, const std::string& socket) {
+  DaemonConfig c;
+  c.file = fs::absolute(file);
+  YAML::Node holder;
+  sp::Section y = sp::open_root(c.file, holder);
+  auto path_key = [&](sp::Section& s, const std::string& key) {
+    const fs::path p = relative_to(c.file, s.get<std::string>(key));
+    if (!fs::exists(p)) s.fail(s.key_path(key), "no such file '" + p.string() + "'");
+    return p;
+  };
+  c.cell_file = path_key(y, "cell");
+  c.drivers_file = path_key(y, "drivers");
+  c.sensor_file = path_key(y, "sensor");
+  c.spec_file = path_key(y, "spec");
+  c.planner_file = path_key(y, "planner");
+  if (y.has("calibration")) {
+    const YAML::Node n = y.raw("calibration");
+    if (!n.IsSequence()) y.fail("calibration", "must be a list of files");
+    for (std::size_t k = 0; k < n.size(); ++k) {
+      const fs::path p = relative_to(c.file, n[k].as<std::string>());
+      if (!fs::exists(p)) y.fail("calibration[" + std::to_string(k) + "]", "no such file '" + p.string() + "'");
+      c.calibration_files.push_back(p);
+    }
+  }
+  const std::string data_key = y.get<std::string>("data_dir");
+  c.data_dir = data_dir.empty() ? relative_to(c.file, data_key) : fs::absolute(data_dir);
+  c.lcm_url = y.get_or<std::string>("lcm_url", std::string("udpm://239.255.76.67:7667?ttl=0"));
+  if (c.lcm_url.rfind("udpm://", 0) != 0 && c.lcm_url.rfind("memq://", 0) != 0 && c.lcm_url.rfind("file://", 0) != 0)
+    y.fail("lcm_url", "must be a udpm://, memq:// or file:// LCM URL, got '" + c.lcm_url + "'");
+  {
+    sp::Section s = y.section("control");
+    const std::string socket_key = s.get<std::string>("socket");
+    c.socket_path = socket.empty() ? relative_to(c.file, socket_key) : fs::absolute(socket);
+    c.socket_group = s.get_or<std::string>("group", "");
+    s.finish();
+  }
+  {
+    sp::Section s = y.section("scanner");
+    c.scanner_driver = s.get<std::string>("driver");
+    if (c.scanner_driver != "sim")
+      s.fail(s.key_path("driver"), "only 'sim' is available (a vendor scanner SDK is not part of this build), got '" + c.scanner_driver + "'");
+    c.scanner_seed = s.get_or<std::uint64_t>("seed", 1);
+    s.finish();
+  }
+  if (y.has("jobs")) {
+    sp::Section s = y.section("jobs");
+    c.jobs.max_rounds = s.get_or<int>("max_rounds", c.jobs.max_rounds);
+    if (c.jobs.max_rounds < 1 || c.jobs.max_rounds > 50) s.fail(s.key_path("max_rounds"), "must be in [1, 50]");
+    c.jobs.coverage.row_fraction = s.get_or<double>("row_fraction", c.jobs.coverage.row_fraction);
+    if (!(c.jobs.coverage.row_fraction > 0.0 && c.jobs.coverage.row_fraction <= 1.0))
+      s.fail(s.key_path("row_fraction"), "must be in (0, 1]");
+    c.jobs.coverage.normal_tolerance_mm = s.non_negative("normal_tolerance_mm", 0.0);
+    c.jobs.move_timeout = std::chrono::milliseconds(static_cast<long>(1000.0 * s.get_or<double>("move_timeout_s", 60.0)));
+    if (c.jobs.move_timeout.count() <= 0) s.fail(s.key_path("move_timeout_s"), "must be > 0");
+    c.jobs.scan_speed_mm_s = s.non_negative("scan_speed_mm_s", 0.0);
+    c.jobs.trigger_width = std::chrono::microseconds(static_cast<long>(s.non_negative("trigger_width_us", 0.0)));
+    c.jobs.planner_threads = s.get_or<int>("planner_threads", 0);
+    if (c.jobs.planner_threads < 0) s.fail(s.key_path("planner_threads"), "must be >= 0 (0: all cores)");
+    c.home_timeout = std::chrono::milliseconds(static_cast<long>(1000.0 * s.get_or<double>("home_timeout_s", 60.0)));
+    s.finish();
+  }
+  y.finish();
+  c.jobs.jobs_dir = c.data_dir / "jobs";
+  c.models.cell = sp::load_cell(c.cell_file);
+  c.models.sensor = sp::load_sensor(c.sensor_file);
+  c.models.spec = sp::load_spec(c.spec_file);
+  c.models.settings = sp::load_planner_settings(c.planner_file);
+  c.drivers = drivers::load_driver_setup(c.drivers_file);
+  bool sweep = false;
+  for (const auto& a : c.models.cell.axes) sweep = sweep || a.name == "sweep";
+  if (!sweep) y.fail("cell", "cell '" + c.models.cell.name + "' has no 'sweep' axis; line-scan execution needs one");
+  return c;
+}
+
+std::vector<std::string> reload_calibration(DaemonConfig& c) {
+  // Load everything first: a bad file leaves the running models untouched.
+  const sp::SensorModel sensor = sp::load_sensor(c.sensor_file);
+  const sp::CellModel cell = sp::load_cell(c.cell_file);
+  std::vector<std::string> changes;
+  auto differ = [](const std::string& a, const std::string& b) { return a != b; };
+  std::ostringstream before, after;
+  before << c.models.sensor.noise_cz_per_mm << ' ' << c.models.sensor.grazing_xz_rad << ' ' << c.models.sensor.grazing_yz_rad;
+  after << sensor.noise_cz_per_mm << ' ' << sensor.grazing_xz_rad << ' ' << sensor.grazing_yz_rad;
+  if (differ(before.str(), after.str()))
+    changes.push_back("sensor " + c.sensor_file.string() + ": C_z t_xz t_yz " + before.str() + " -> " + after.str());
+  std::ostringstream pb, pa;
+  pb << c.models.cell.pose_error.sigma_p_mm << ' ' << c.models.cell.pose_error.sigma_a_rad << ' ' << c.models.cell.pose_error.sigma_t_rad;
+  pa << cell.pose_error.sigma_p_mm << ' ' << cell.pose_error.sigma_a_rad << ' ' << cell.pose_error.sigma_t_rad;
+  if (differ(pb.str(), pa.str()))
+    changes.push_back("cell " + c.cell_file.string() + ": pose error sigma_p_mm sigma_a_rad sigma_t_rad " + pb.str() + " -> " + pa.str());
+  for (const auto& f : c.calibration_files)
+    if (!fs::exists(f)) throw sp::ConfigError(f.string() + ": calibration file vanished");
+  if (cell.axes.size() != c.models.cell.axes.size())
+    throw sp::ConfigError(c.cell_file.string() + ": axes changed; restart the daemon to change the cell's axes");
+  c.models.sensor = sensor;
+  c.models.cell = cell;
+  return changes;
+}
+
+}  // namespace scancell::daemon

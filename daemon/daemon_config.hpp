@@ -1,0 +1,42 @@
+#pragma once
+// scancelld's configuration (config/scancelld.yaml): which cell, drivers, sensor, spec and planner settings it
+// runs with (paths relative to the config file), where it keeps its data, its LCM URL, its control socket and
+// the job loop's limits. Anything wrong refuses the start with "file: key.path: why" (planner::ConfigError).
+#include <chrono>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "daemon/job_runner.hpp"
+#include "drivers/config.hpp"
+
+namespace scancell::daemon {
+
+struct DaemonConfig {
+  std::filesystem::path file;
+  std::filesystem::path cell_file, drivers_file, sensor_file, spec_file, planner_file;
+  std::vector<std::filesystem::path> calibration_files;  // reloaded on SIGHUP
+  std::filesystem::path data_dir;
+  std::string lcm_url;
+  std::filesystem::path socket_path;
+  std::string socket_group;
+  std::string scanner_driver = "sim";  // sim: the simulated line scanner (no vendor SDK in this build)
+  std::uint64_t scanner_seed = 1;
+  JobSettings jobs;
+  std::chrono::milliseconds home_timeout{60000};
+
+  // Loaded from the files above.
+  CellModels models;
+  drivers::DriverSetup drivers;
+};
+
+/// Reads the config and every file it names. `data_dir` / `socket` override the file's values when not empty.
+DaemonConfig load_daemon_config(const std::filesystem::path& file, const std::string& data_dir = "",
+                                const std::string& socket = "");
+
+/// Re-reads the calibration-bearing files (sensor model, cell model with its pose-error model) for SIGHUP;
+/// returns what changed, one line per change; throws ConfigError and leaves `config` untouched when a file
+/// is bad.
+std::vector<std::string> reload_calibration(DaemonConfig& config);
+
+}  // namespace scancell::daemon

@@ -1,0 +1,100 @@
+#!/bin/bash
+# scancelld and scancellctl as an integrator uses them: a bad config refuses the start naming the key; the
+# control socket refuses bad requests and keeps serving; pause, resume and abort act on a running job; SIGHUP
+# reloads; LCM status goes out (recorded by lcm-logger from another process); SIGTERM stops cleanly.
+#   tests/daemon/daemon_cli_test.sh BUILD_DIR
+set -uo pipefail
+BUILD=$(cd "$1" && pwd)
+SRC=$(cd "$(dirname "$0")/../.." && pwd)
+W=$(mktemp -d /tmp/scancell_cli.XXXXXX)
+PORT=$((17500 + ($$ % 400) * 8))
+LCM_PORT=$((7800 + $$ % 100))  # its own LCM port: other tests publish on the default one
+fail() { echo "FAIL: $*"; [ -f "$W/daemon.log" ] && tail -20 "$W/daemon.log"; exit 1; }
+cleanup() {
+  [ -n "${DAEMON_PID:-}" ] && kill -9 "$DAEMON_PID" 2>/dev/null
+  [ -n "${SIM_PID:-}" ] && kill -TERM "$SIM_PID" 2>/dev/null
+  [ -n "${LOGGER_PID:-}" ] && kill -TERM "$LOGGER_PID" 2>/dev/null
+  wait 2>/dev/null
+  rm -rf "$W"
+}
+trap cleanup EXIT
+awk -v base="$PORT" '{ if (match($0, /port: [0-9]+/)) { p = substr($0, RSTART + 6, RLENGTH - 6); sub(/port: [0-9]+/, "port: " base + (p % 10) - 1) } print }' \
+  "$SRC/config/drivers/demo-sim.yaml" > "$W/drivers.yaml"
+write_config() {
+  cat > "$W/scancelld.yaml" <<YAML
+cell: $SRC/config/cells/turntable-lift-tilt.yaml
+drivers: $W/drivers.yaml
+sensor: $SRC/config/sensors/line-scan-thesis.yaml
+spec: $SRC/config/spec/thesis.yaml
+planner: $SRC/config/planner/default.yaml
+data_dir: $W/data
+lcm_url: "udpm://239.255.76.67:$LCM_PORT?ttl=0"
+control: {socket: $W/control.sock}
+scanner: {driver: sim}
+jobs: {max_rounds: 2, move_timeout_s: 20, scan_speed_mm_s: 100, home_timeout_s: 20$1}
+YAML
+}
+ctl() { "$BUILD/tools/scancellctl" --socket "$W/control.sock" "$@"; }
+
+# 1. Bad configuration: refused at start, key path named, exit 4.
+write_config ", max_roundz: 3"
+out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
+[ $rc = 4 ] || fail "bad config: exit $rc, want 4"
+echo "$out" | grep -q "jobs.max_roundz: unknown key" || fail "bad config message: $out"
+write_config ""
+sed -i 's|planner: .*|planner: /nonexistent/planner.yaml|' "$W/scancelld.yaml"
+out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
+[ $rc = 4 ] && echo "$out" | grep -q "planner: no such file" || fail "missing file: exit $rc: $out"
+write_config ""
+
+# 2. Start on simulated drives; watch LCM from another process.
+"$BUILD/tools/scancell-sim" modbus --tcp "$PORT" --drives 5 --max-velocity 4000000 --accel 40000000 --no-stdin > "$W/sim.log" 2>&1 &
+SIM_PID=$!
+for _ in $(seq 100); do grep -q "drive 4 on" "$W/sim.log" 2>/dev/null && break; sleep 0.05; done
+lcm-logger --lcm-url="udpm://239.255.76.67:$LCM_PORT?ttl=0" -q "$W/lcm.log" &
+LOGGER_PID=$!
+"$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" > "$W/daemon.log" 2>&1 &
+DAEMON_PID=$!
+for _ in $(seq 400); do [ -S "$W/control.sock" ] && break; sleep 0.025; done
+[ -S "$W/control.sock" ] || fail "daemon did not start"
+[ "$(stat -c %a "$W/control.sock")" = 660 ] || fail "socket mode $(stat -c %a "$W/control.sock")"
+
+# 3. Bad requests are refused with a reason; the daemon keeps serving.
+out=$(ctl submit --mesh "$SRC/tests/data/bad/empty.stl" 2>&1); rc=$?
+[ $rc = 1 ] && echo "$out" | grep -q "empty.stl" || fail "bad mesh: exit $rc: $out"
+out=$(ctl watch 99 2>&1); rc=$?
+[ $rc = 1 ] && echo "$out" | grep -q "no job 99" || fail "unknown job: exit $rc: $out"
+out=$(ctl resume 99 2>&1); [ $? = 1 ] || fail "resume of an unknown job accepted"
+ctl status > /dev/null || fail "status after bad requests"
+
+# 4. A job: pause at a safe point, resume, abort.
+ctl submit --mesh "$SRC/tests/data/cube50.off" --rough-vertices 400 > /dev/null || fail "submit"
+for _ in $(seq 400); do ctl status 1 | grep -q '"view": [3-9]' && break; sleep 0.05; done
+ctl status 1 | grep -q '"view": [3-9]' || fail "view 3 not reached within 20 s"
+ctl pause 1 > /dev/null || fail "pause"
+ctl watch 1 > "$W/watch1.log"; rc=$?
+[ $rc = 13 ] || fail "watch after pause: exit $rc, want 13 (paused)"
+stored=$("$BUILD/daemon/scancelld" --check "$W/data" | grep -o '"scans":[0-9]*' | cut -d: -f2)
+ctl resume 1 > /dev/null || fail "resume"
+for _ in $(seq 400); do
+  now=$("$BUILD/daemon/scancelld" --check "$W/data" | grep -o '"scans":[0-9]*' | cut -d: -f2)
+  [ "$now" -gt "$stored" ] && break; sleep 0.05
+done
+[ "$now" -gt "$stored" ] || fail "the resumed job stored no further view"
+ctl abort 1 > /dev/null || fail "abort"
+ctl watch 1 > "$W/watch2.log"; rc=$?
+[ $rc = 11 ] || fail "watch after abort: exit $rc, want 11 (aborted)"
+out=$(ctl abort 1 2>&1); [ $? = 1 ] && echo "$out" | grep -q "already aborted" || fail "second abort: $out"
+
+# 5. SIGHUP reloads; SIGTERM stops at a safe point and exits 0.
+kill -HUP "$DAEMON_PID"; sleep 0.3
+grep -q "SIGHUP reload" "$W/daemon.log" || fail "SIGHUP not handled"
+kill -TERM "$DAEMON_PID"; wait "$DAEMON_PID"; rc=$?; DAEMON_PID=""
+[ $rc = 0 ] || fail "SIGTERM exit $rc"
+grep -q "scancelld: stopped" "$W/daemon.log" || fail "no clean stop"
+kill -TERM "$LOGGER_PID"; wait "$LOGGER_PID" 2>/dev/null; LOGGER_PID=""
+for ch in SCANCELL_STATUS SCANCELL_PROGRESS SCANCELL_AXIS_STATE SCANCELL_PLAN; do
+  grep -aq "$ch" "$W/lcm.log" || fail "lcm-logger recorded no $ch"
+done
+"$BUILD/daemon/scancelld" --check "$W/data" > /dev/null || fail "journal inconsistent"
+echo "daemon_cli_test: all checks passed"

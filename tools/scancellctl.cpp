@@ -1,0 +1,222 @@
+// scancellctl: the command-line client of scancelld's control socket (docs/daemon.md).
+//   scancellctl [--socket PATH] [--json] submit --mesh FILE [--fit-mm L] [--spec FILE] [--settings FILE]
+//                                          [--truth FILE] [--rough-vertices N] [--watch]
+//   scancellctl status [JOB] | list | watch JOB | pause JOB | resume JOB | abort JOB | reload
+// Exit codes: 0 success (watch: the job is done), 1 the daemon refused the request, 2 usage, 3 cannot reach
+// the daemon; watch: 10 stalled, 11 aborted, 12 faulted, 13 paused.
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <iostream>
+#include <string>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+using nlohmann::json;
+
+namespace {
+
+class Connection {
+ public:
+  explicit Connection(const std::string& path) {
+    fd_ = ::socket(AF_UNIX, SOCK_STREAM, 0);
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    if (fd_ < 0 || path.size() >= sizeof addr.sun_path) throw std::runtime_error(path + ": bad socket path");
+    std::memcpy(addr.sun_path, path.c_str(), path.size() + 1);
+    if (::connect(fd_, reinterpret_cast<sockaddr*>(&addr), sizeof addr) < 0)
+      throw std::runtime_error(path + ": " + std::strerror(errno) + " (is scancelld running? --socket or SCANCELL_SOCKET)");
+  }
+  ~Connection() { ::close(fd_); }
+  void send(const json& j) {
+    const std::string s = j.dump() + "\n";
+    for (std::size_t off = 0; off < s.size();) {
+      const ssize_t n = ::send(fd_, s.data() + off, s.size() - off, MSG_NOSIGNAL);
+      if (n <= 0) throw std::runtime_error(std::string("send: ") + std::strerror(errno));
+      off += static_cast<std::size_t>(n);
+    }
+  }
+  /// The next line as JSON; throws when the daemon hangs up.
+  json receive() {
+    while (true) {
+      const auto nl = buf_.find('\n');
+      if (nl != std::string::npos) {
+        const std::string line = buf_.substr(0, nl);
+        buf_.erase(0, nl + 1);
+        return json::parse(line);
+      }
+      char chunk[4096];
+      const ssize_t n = ::recv(fd_, chunk, sizeof chunk, 0);
+      if (n <= 0) throw std::runtime_error("the daemon closed the connection");
+      buf_.append(chunk, static_cast<std::size_t>(n));
+    }
+  }
+
+ private:
+  int fd_ = -1;
+  std::string buf_;
+};
+
+std::string absolute(const std::string& p) { return p.empty() ? p : std::filesystem::absolute(p).lexically_normal().string(); }
+
+int outcome_code(const std::string& state) {
+  if (state == "done") return 0;
+  if (state == "stalled") return 10;
+  if (state == "aborted") return 11;
+  if (state == "faulted") return 12;
+  if (state == "paused") return 13;
+  return 1;
+}
+
+std::string bar(double fraction, int width) {
+  const int full = static_cast<int>(std::lround(std::clamp(fraction, 0.0, 1.0) * width));
+  return std::string(static_cast<std::size_t>(full), '#') + std::string(static_cast<std::size_t>(width - full), '.');
+}
+
+void print_result(const json& reply, double seconds) {
+  const json r = reply.value("result", json::object());
+  std::printf("\njob %lld: %s\n", static_cast<long long>(reply.value("job", 0)), reply.value("state", "?").c_str());
+  if (!reply.value("cause", std::string()).empty()) std::printf("  %s\n", reply["cause"].get<std::string>().c_str());
+  auto num = [&](const char* k) { return r.contains(k) ? r[k].get<double>() : std::nan(""); };
+  std::printf("  %-34s %d\n", "views executed", r.value("views", 0));
+  std::printf("  %-34s %d\n", "plan rounds", r.value("rounds", 0));
+  std::printf("  %-34s %.4f\n", "estimated coverage (planner)", num("estimated_coverage"));
+  std::printf("  %-34s %.4f\n", "measured coverage (rough model)", num("measured_coverage"));
+  if (r.contains("verified_mv"))
+    std::printf("  %-34s %.4f  (against %s)\n", "verified m_v (ground truth)", num("verified_mv"), r["verified_against"].get<std::string>().c_str());
+  std::printf("  %-34s %.1f mm2 in %d rows\n", "not measured, measurable", num("open_area_mm2"), r.value("open_rows", 0));
+  std::printf("  %-34s %d rows\n", "unmeasurable in this cell", r.value("unmeasurable_rows", 0));
+  if (seconds > 0.0) std::printf("  %-34s %.1f s\n", "watched for", seconds);
+  if (r.contains("coverage_png")) std::printf("  %-34s %s\n", "coverage picture", r["coverage_png"].get<std::string>().c_str());
+  if (r.contains("unmeasured_file")) std::printf("  %-34s %s\n", "unmeasured rows", r["unmeasured_file"].get<std::string>().c_str());
+}
+
+int watch(Connection& c, std::int64_t job, bool as_json) {
+  const auto t0 = std::chrono::steady_clock::now();
+  c.send({{"cmd", "watch"}, {"job", job}});
+  const bool tty = ::isatty(STDOUT_FILENO) && !as_json;
+  std::string last_line;
+  while (true) {
+    const json m = c.receive();
+    if (m.contains("ok")) {  // the final reply: the job's outcome
+      if (!m["ok"].get<bool>()) {
+        std::cerr << "scancellctl: " << m.value("error", "refused") << "\n";
+        return 1;
+      }
+      const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      if (as_json) std::cout << m.dump() << std::endl;
+      else print_result(m, secs);
+      return outcome_code(m.value("state", ""));
+    }
+    if (as_json) {
+      std::cout << m.dump() << std::endl;
+      continue;
+    }
+    const int views = m.value("views", 0), view = m.value("view", 0);
+    char line[256];
+    std::snprintf(line, sizeof line, "[%s] round %d view %d/%d  measured %.3f  est %.3f  ETA %3.0f s  %-10s",
+                  bar(m.value("measured_coverage", 0.0), 30).c_str(), m.value("round", 0), view, views,
+                  m.value("measured_coverage", 0.0), m.value("estimated_coverage", 0.0), m.value("eta_s", 0.0),
+                  m.value("state", "").c_str());
+    if (tty) {
+      std::printf("\r%s", line);
+      std::fflush(stdout);
+      const std::string ev = m.value("event", "");
+      if (ev.find("stored") == std::string::npos && ev.find(": moving") == std::string::npos &&
+          ev.find(": scanning") == std::string::npos && !ev.empty())
+        std::printf("\n  %s\n", ev.c_str());
+    } else {
+      const std::string ev = m.value("event", "");
+      if (ev.find(": moving") != std::string::npos || ev.find(": scanning") != std::string::npos) continue;
+      std::printf("%s  %s\n", line, ev.c_str());
+    }
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"scancellctl: control scancelld (submit, status, list, watch, pause, resume, abort, reload)"};
+  const char* env = std::getenv("SCANCELL_SOCKET");
+  std::string socket = env ? env : "/run/scancell/control.sock";
+  bool as_json = false;
+  app.add_option("--socket", socket, "control socket of scancelld (default $SCANCELL_SOCKET or /run/scancell/control.sock)");
+  app.add_flag("--json", as_json, "print the daemon's replies as JSON lines");
+  app.require_subcommand(1);
+
+  std::string mesh, spec, settings, truth;
+  double fit_mm = 0.0;
+  int rough_vertices = 0;
+  bool then_watch = false;
+  auto* submit = app.add_subcommand("submit", "queue a scan job on an object's rough model");
+  submit->add_option("--mesh", mesh, "rough model of the object (OFF, PLY, OBJ, STL)")->required()->check(CLI::ExistingFile);
+  submit->add_option("--fit-mm", fit_mm, "scale so the longest side is this many mm (default: the mesh is in mm)")->check(CLI::PositiveNumber);
+  submit->add_option("--spec", spec, "model specification (YAML; default: the daemon's)")->check(CLI::ExistingFile);
+  submit->add_option("--settings", settings, "planner settings (YAML; default: the daemon's)")->check(CLI::ExistingFile);
+  submit->add_option("--truth", truth, "simulation: the object actually on the table (default: the mesh)")->check(CLI::ExistingFile);
+  submit->add_option("--rough-vertices", rough_vertices, "rough-model size (rows of the measurability matrix)")->check(CLI::Range(50, 200000));
+  submit->add_flag("--watch", then_watch, "then watch the job to its end");
+
+  std::int64_t job = 0;
+  auto* status = app.add_subcommand("status", "daemon status, or one job's");
+  status->add_option("job", job, "job id");
+  app.add_subcommand("list", "the latest jobs");
+  auto* w = app.add_subcommand("watch", "live progress of a job; exits with its outcome");
+  w->add_option("job", job, "job id")->required();
+  CLI::App* ctl[3];
+  const char* names[3] = {"pause", "resume", "abort"};
+  const char* help[3] = {"pause at the next safe point", "continue a paused or faulted job (clears drive faults)", "end a job"};
+  for (int k = 0; k < 3; ++k) {
+    ctl[k] = app.add_subcommand(names[k], help[k]);
+    ctl[k]->add_option("job", job, "job id")->required();
+  }
+  app.add_subcommand("reload", "re-read the calibration (sensor and cell models)");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? 0 : 2;
+  }
+
+  try {
+    Connection c(socket);
+    const std::string cmd = app.get_subcommands().front()->get_name();
+    if (cmd == "watch") return watch(c, job, as_json);
+    json req = {{"cmd", cmd}};
+    if (cmd == "submit") {
+      req["mesh"] = absolute(mesh);
+      if (fit_mm > 0.0) req["fit_mm"] = fit_mm;
+      if (!spec.empty()) req["spec"] = absolute(spec);
+      if (!settings.empty()) req["settings"] = absolute(settings);
+      if (!truth.empty()) req["truth"] = absolute(truth);
+      if (rough_vertices > 0) req["rough_vertices"] = rough_vertices;
+    } else if (cmd == "status") {
+      if (job > 0) req["job"] = job;
+    } else if (cmd != "list" && cmd != "reload") {
+      req["job"] = job;
+    }
+    c.send(req);
+    const json reply = c.receive();
+    if (!reply.value("ok", false)) {
+      std::cerr << "scancellctl: " << reply.value("error", "refused") << "\n";
+      return 1;
+    }
+    if (as_json || cmd != "submit") std::cout << reply.dump(as_json ? -1 : 2) << std::endl;
+    else std::cout << "job " << reply["job"] << " queued" << std::endl;
+    if (cmd == "submit" && then_watch) return watch(c, reply["job"].get<std::int64_t>(), as_json);
+    return 0;
+  } catch (const std::runtime_error& e) {
+    std::cerr << "scancellctl: " << e.what() << "\n";
+    return 3;
+  } catch (const json::exception& e) {
+    std::cerr << "scancellctl: unreadable reply from the daemon: " << e.what() << "\n";
+    return 1;
+  }
+}
