@@ -76,8 +76,10 @@ void Daemon::job_loop() {
       models = config_.models;
     }
     const std::uint64_t seed = config_.scanner_seed;
-    auto heads = [&models, seed](const planner::TriangleMesh& scene, std::size_t object_triangles) {
-      return make_sim_head(models.sensor, scene, object_triangles, seed);
+    const std::optional<SimTruth> truth = config_.truth;
+    auto heads = [&models, seed, &truth](const planner::TriangleMesh& scene, std::size_t object_triangles,
+                                         const planner::CellModel& placed) {
+      return make_sim_head(models.sensor, scene, object_triangles, seed, &placed, truth ? &*truth : nullptr);
     };
     JobRunner runner(*journal_, models, io_->positioner, heads, config_.jobs, [this](const Progress& p) { report(p); });
     stop_ = 0;

@@ -62,6 +62,30 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
     if (c.scanner_driver != "sim")
       s.fail(s.key_path("driver"), "only 'sim' is available (a vendor scanner SDK is not part of this build), got '" + c.scanner_driver + "'");
     c.scanner_seed = s.get_or<std::uint64_t>("seed", 1);
+    if (s.has("truth")) {
+      // The simulated cell's truth where it differs from the models: what calibration must recover.
+      sp::Section t = s.section("truth");
+      SimTruth truth;
+      if (t.has("sensor")) truth.sensor = sp::load_sensor(path_key(t, "sensor"));
+      if (t.has("table_axis")) {
+        sp::Section a = t.section("table_axis");
+        truth.table_axis_point_mm = a.vec3("point_mm");
+        truth.table_axis_direction = a.vec3("direction");
+        if (!(truth.table_axis_direction.norm() > 0.0)) a.fail(a.key_path("direction"), "must not be zero");
+        truth.table_axis_direction.normalize();
+        a.finish();
+      }
+      if (t.has("pose_error")) {
+        sp::Section p = t.section("pose_error");
+        truth.pose_error.sigma_p_mm = p.non_negative("sigma_p_mm", 0.0);
+        truth.pose_error.sigma_a_rad = p.non_negative("sigma_a_rad", 0.0);
+        truth.pose_error.sigma_t_rad = p.non_negative("sigma_t_rad", 0.0);
+        p.finish();
+      }
+      truth.seed = t.get_or<std::uint64_t>("seed", 1);
+      t.finish();
+      c.truth = truth;
+    }
     s.finish();
   }
   if (y.has("jobs")) {

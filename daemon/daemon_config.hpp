@@ -4,6 +4,7 @@
 // the job loop's limits. Anything wrong refuses the start with "file: key.path: why" (planner::ConfigError).
 #include <chrono>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -22,6 +23,7 @@ struct DaemonConfig {
   std::string socket_group;
   std::string scanner_driver = "sim";  // sim: the simulated line scanner (no vendor SDK in this build)
   std::uint64_t scanner_seed = 1;
+  std::optional<SimTruth> truth;       // scanner.truth: what the simulated cell really is (calibration tests)
   JobSettings jobs;
   std::chrono::milliseconds home_timeout{60000};
 

@@ -1,5 +1,7 @@
 #include "daemon/job_runner.hpp"
 
+#include "daemon/acquire.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <fstream>
@@ -9,6 +11,7 @@
 
 #include "planner/errors.hpp"
 #include "planner/mesh.hpp"
+#include "planner/pose_error.hpp"
 #include "planner/verify.hpp"
 #include "planner/virtual_scanner.hpp"
 
@@ -43,14 +46,32 @@ std::string fmt(double v, int digits = 4) {
 
 class SimHead : public ScanHead {
  public:
-  SimHead(const sp::SensorModel& sensor, const sp::TriangleMesh& scene, std::size_t object_triangles, std::uint64_t seed)
-      : scanner_(sensor, scene, [this] {
+  SimHead(const sp::SensorModel& sensor, const sp::TriangleMesh& scene, std::size_t object_triangles, std::uint64_t seed,
+          const sp::CellModel* placed, const SimTruth* truth)
+      : scanner_(truth && truth->sensor ? *truth->sensor : sensor, scene, [this] {
           std::lock_guard<std::mutex> lock(mu_);
           return pose_;
-        }, seed, object_triangles) {}
+        }, seed, object_triangles) {
+    if (truth && placed) {
+      truth_ = *truth;
+      cell_ = *placed;
+      cell_->table_axis_point_mm = truth->table_axis_point_mm;
+      cell_->table_axis_direction = truth->table_axis_direction.normalized();
+    }
+  }
   dr::DigitalOutput& trigger() override { return scanner_; }
   dr::Scanner& scanner() override { return scanner_; }
-  void camera_at(const Eigen::Isometry3d& p) override {
+  void moved() override {
+    std::lock_guard<std::mutex> lock(mu_);
+    ++moves_;
+  }
+  void camera_at(const sp::JointVector& q, const Eigen::Isometry3d& modelled) override {
+    Eigen::Isometry3d p = modelled;
+    if (cell_) {
+      // The error of the last positioning move; the sweep carries the camera rigidly.
+      sp::ScanPose sp_pose{sp::forward_kinematics(*cell_, q), 0.0};
+      p = sp::sample_pose_error(sp_pose, truth_.pose_error, sp::mix_seed(truth_.seed, moves_, 7)).camera_to_object;
+    }
     std::lock_guard<std::mutex> lock(mu_);
     pose_ = p;
   }
@@ -58,6 +79,9 @@ class SimHead : public ScanHead {
  private:
   std::mutex mu_;
   Eigen::Isometry3d pose_ = Eigen::Isometry3d::Identity();
+  std::optional<sp::CellModel> cell_;
+  SimTruth truth_;
+  std::uint64_t moves_ = 0;
   dr::SimScanner scanner_;
 };
 
@@ -70,8 +94,9 @@ sp::TriangleMesh load_object(const std::string& path, double fit_mm) {
 }  // namespace
 
 std::unique_ptr<ScanHead> make_sim_head(const sp::SensorModel& sensor, const sp::TriangleMesh& scene,
-                                        std::size_t object_triangles, std::uint64_t seed) {
-  return std::make_unique<SimHead>(sensor, scene, object_triangles, seed);
+                                        std::size_t object_triangles, std::uint64_t seed, const sp::CellModel* placed,
+                                        const SimTruth* truth) {
+  return std::make_unique<SimHead>(sensor, scene, object_triangles, seed, placed, truth);
 }
 
 json JobRequest::to_json() const {
@@ -277,7 +302,7 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
     {
       const std::string truth = j.request.truth.empty() ? j.request.mesh : j.request.truth;
       const sp::TriangleMesh object = load_object(truth, j.request.fit_mm);
-      j.head = heads_(sp::with_fixtures(object, j.cell), object.triangles.size());
+      j.head = heads_(sp::with_fixtures(object, j.cell), object.triangles.size(), j.cell);
     }
 
     while (true) {
@@ -413,98 +438,22 @@ void JobRunner::execute_view(Job& j, std::int64_t plan, const ViewRecord& v, con
   if (q.size() != cell.axes.size())
     throw sp::DataError("plan " + std::to_string(plan) + " view " + std::to_string(v.index) + ": " + std::to_string(q.size()) +
                         " axis targets for a cell of " + std::to_string(cell.axes.size()) + " axes");
-  const std::size_t sweep = cell.axis_index("sweep");
-  const double mid = q[sweep], start = mid - 0.5 * L, end = mid + 0.5 * L;
-  const int n_rows = models_.sensor.samples_y, n_cols = models_.sensor.samples_x;
 
   j.progress.view = v.index + 1;
-  j.progress.event = "view " + std::to_string(v.index + 1) + "/" + std::to_string(j.progress.views) + ": moving";
   double remaining = 0.0;
   for (std::size_t k = static_cast<std::size_t>(v.index); k < j.planned_view_s.size(); ++k) remaining += j.planned_view_s[k];
   if (j.views_timed > 0 && j.planned_view_s.size() > static_cast<std::size_t>(v.index))
     remaining = j.view_seconds * static_cast<double>(j.planned_view_s.size() - static_cast<std::size_t>(v.index));
   j.progress.eta_s = remaining;
-  report_(j.progress);
 
-  // 1. Move to the start of the sweep, every axis together.
-  std::map<std::string, double> targets;
-  for (std::size_t a = 0; a < cell.axes.size(); ++a) targets[cell.axes[a].name] = a == sweep ? start : q[a];
-  positioner_.move(targets, settings_.move_timeout);
+  const Acquisition got = acquire_view(positioner_, *j.head, cell, models_.sensor, q, L, settings_, stop, [&](const std::string& what) {
+    j.progress.event = "view " + std::to_string(v.index + 1) + "/" + std::to_string(j.progress.views) + ": " + what;
+    report_(j.progress);
+  });
+  const sp::RangeImage& img = got.image;
+  const int lost = got.lost_profiles;
 
-  // 2. Sweep at the scan speed; fire one profile each time the sweep passes the next profile's position
-  //    (software position compare, as a drive's position-compare output would in hardware). The pose of each
-  //    profile is the kinematics at the position read back: what the camera really did, not what was planned.
-  const double speed = settings_.scan_speed_mm_s > 0.0 ? settings_.scan_speed_mm_s : cell.scan_speed_mm_s;
-  const double pitch = L / (n_rows - 1);
-  const auto sweep_timeout = std::chrono::milliseconds(static_cast<long>(2000.0 * L / speed)) + settings_.move_timeout;
-  j.progress.event = "view " + std::to_string(v.index + 1) + "/" + std::to_string(j.progress.views) + ": scanning";
-  report_(j.progress);
-  dr::Axis& sweep_axis = positioner_.axis("sweep");
-  std::vector<double> qs = q;
-  std::vector<int> fired_rows;
-  std::vector<Eigen::Isometry3d> fired_pose;
-  int next = 0;
-  auto fire_up_to = [&](double y) {
-    // Positions come back in drive counts (1 µm): a profile is due within half a count of its place.
-    constexpr double kCount = 5e-4;
-    if (next >= n_rows || y < start + next * pitch - kCount) return;
-    // Rows passed since the last read are lost; fire for the latest one only, at the position read.
-    const int row = std::min(n_rows - 1, static_cast<int>(std::floor((y - start + kCount) / pitch)));
-    qs[sweep] = y;
-    const Eigen::Isometry3d pose = sp::forward_kinematics(cell, qs);
-    j.head->camera_at(pose);
-    j.head->trigger().set(true);
-    if (settings_.trigger_width.count() > 0) std::this_thread::sleep_for(settings_.trigger_width);
-    j.head->trigger().set(false);
-    fired_rows.push_back(row);
-    fired_pose.push_back(pose);
-    next = row + 1;
-  };
-  fire_up_to(sweep_axis.state().position);
-  positioner_.begin_move("sweep", end, speed);
-  const auto deadline = Clock::now() + sweep_timeout;
-  while (true) {
-    const auto why = static_cast<StopRequest>(stop.load());
-    if (why != StopRequest::none) {
-      sweep_axis.halt();
-      throw Interrupted(why, "during the sweep of view " + std::to_string(v.index + 1) + " (its partial scan is discarded)");
-    }
-    const dr::AxisState st = sweep_axis.state();
-    if (st.faulted) break;  // finish_move reports the drive's fault
-    fire_up_to(st.position);
-    if (!st.moving && st.in_position) break;
-    if (Clock::now() > deadline) break;  // finish_move times out with a halt
-    std::this_thread::sleep_for(std::chrono::microseconds(50));
-  }
-  sweep_axis.finish_move(end, std::chrono::milliseconds(std::max<long>(100, std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count())));
-  fire_up_to(sweep_axis.state().position);
-
-  // 3. Collect the profiles into the range image of the view (the nominal pose at mid-sweep; samples carry
-  //    their own measured positions in both frames).
-  sp::RangeImage img;
-  img.kind = models_.sensor.kind;
-  img.columns = n_cols;
-  img.rows = n_rows;
-  qs[sweep] = mid;
-  img.pose.camera_to_object = sp::forward_kinematics(cell, qs);
-  img.pose.scan_length_mm = L;
-  img.samples.assign(static_cast<std::size_t>(n_cols) * n_rows, sp::RangeSample{});
-  const Eigen::Isometry3d object_to_view = img.pose.camera_to_object.inverse();
-  for (std::size_t k = 0; k < fired_rows.size(); ++k) {
-    const dr::Profile prof = j.head->scanner().acquire(std::chrono::milliseconds(2000));
-    if (prof.samples.size() != static_cast<std::size_t>(n_cols))
-      throw dr::DriverError(dr::DriverError::Kind::protocol, "scanner", "profile " + std::to_string(prof.index),
-                            std::to_string(prof.samples.size()) + " samples, the sensor model has " + std::to_string(n_cols));
-    for (int i = 0; i < n_cols; ++i) {
-      sp::RangeSample s = prof.samples[static_cast<std::size_t>(i)];
-      if (!s.valid()) continue;
-      s.camera_mm = (object_to_view * s.object_mm.cast<double>()).cast<float>();
-      img.samples[static_cast<std::size_t>(fired_rows[k]) * n_cols + i] = s;
-    }
-  }
-  const int lost = n_rows - static_cast<int>(fired_rows.size());
-
-  // 4. Store (durable before it counts), then update the measured coverage.
+  // Store (durable before it counts), then update the measured coverage.
   journal_.store_scan(plan, v.index, sp::range_image_to_ply(img));
   j.coverage->add(img);
   j.progress.measured = j.coverage->coverage();

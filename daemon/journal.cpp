@@ -18,7 +18,8 @@ namespace {
 const std::map<JobState, const char*> kNames = {
     {JobState::queued, "queued"},     {JobState::planning, "planning"}, {JobState::executing, "executing"},
     {JobState::verifying, "verifying"}, {JobState::replanning, "replanning"}, {JobState::paused, "paused"}, {JobState::done, "done"},
-    {JobState::stalled, "stalled"},   {JobState::aborted, "aborted"},   {JobState::faulted, "faulted"}};
+    {JobState::stalled, "stalled"},   {JobState::aborted, "aborted"},   {JobState::faulted, "faulted"},
+    {JobState::failed, "failed"}};
 
 /// A prepared statement that finalises itself; errors name the database and the SQL.
 class Stmt {
@@ -101,7 +102,9 @@ JobState job_state_from(const std::string& s) {
   throw std::invalid_argument("unknown job state '" + s + "'");
 }
 
-bool finished(JobState s) { return s == JobState::done || s == JobState::stalled || s == JobState::aborted; }
+bool finished(JobState s) {
+  return s == JobState::done || s == JobState::stalled || s == JobState::aborted || s == JobState::failed;
+}
 
 Journal::Journal(const std::filesystem::path& dir) : dir_(dir) {
   std::filesystem::create_directories(dir_ / "scans");
@@ -208,7 +211,7 @@ std::string Journal::plan_info(std::int64_t plan) {
 std::vector<JobRecord> Journal::unfinished_jobs() {
   std::lock_guard<std::recursive_mutex> lock(mu_);
   std::vector<JobRecord> out;
-  Stmt s(db_, "SELECT id, state, mesh, request, cause, result FROM jobs WHERE state NOT IN ('done', 'stalled', 'aborted') ORDER BY id");
+  Stmt s(db_, "SELECT id, state, mesh, request, cause, result FROM jobs WHERE state NOT IN ('done', 'stalled', 'aborted', 'failed') ORDER BY id");
   while (s.step()) out.push_back({s.i64(0), job_state_from(s.text(1)), s.text(2), s.text(3), s.text(4), s.text(5)});
   return out;
 }

@@ -16,10 +16,10 @@ struct sqlite3;
 
 namespace scancell::daemon {
 
-enum class JobState { queued, planning, executing, verifying, replanning, paused, done, stalled, aborted, faulted };
+enum class JobState { queued, planning, executing, verifying, replanning, paused, done, stalled, aborted, faulted, failed };
 const char* to_string(JobState s);
 JobState job_state_from(const std::string& s);  // throws std::invalid_argument
-bool finished(JobState s);                     // done, stalled, aborted
+bool finished(JobState s);                     // done, stalled, aborted, failed
 
 struct JobRecord {
   std::int64_t id = 0;

@@ -83,9 +83,17 @@ double pose_error(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
 
 }  // namespace
 
+Eigen::Isometry3d table_to_world(const CellModel& c, double angle) {
+  if (c.nominal_table_axis()) return rot_z(angle);
+  Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
+  t.linear() = Eigen::AngleAxisd(angle, c.table_axis_direction.normalized()).toRotationMatrix();
+  t.translation() = c.table_axis_point_mm - t.linear() * c.table_axis_point_mm;
+  return t;
+}
+
 Eigen::Isometry3d forward_kinematics(const CellModel& c, const JointVector& q) {
   if (q.size() != c.axes.size()) throw std::invalid_argument("forward_kinematics: one value per axis");
-  const Eigen::Isometry3d object_to_world = rot_z(q[0]) * c.object_on_table;
+  const Eigen::Isometry3d object_to_world = table_to_world(c, q[0]) * c.object_on_table;
   Eigen::Isometry3d camera_to_world = Eigen::Isometry3d::Identity();
   if (c.kinematics == CellKinematics::turntable_lift_tilt) {
     const double reach = q[1], lift = q[2], tilt = q[3], sweep = q[4];
@@ -111,7 +119,9 @@ IkResult inverse_kinematics(const CellModel& c, const Eigen::Isometry3d& desired
   const Axis& table = c.axes[0];
   if (c.kinematics == CellKinematics::turntable_lift_tilt) {
     const Eigen::Vector3d y = camera_to_table.linear().col(1);
-    if (std::abs(y.z()) > kTol) {
+    // A calibrated axis tilted off world Z tilts the table frame: the baseline may then lean by the tilt.
+    const double lean = c.nominal_table_axis() ? kTol : std::sin(std::acos(std::clamp(c.table_axis_direction.z(), -1.0, 1.0))) + 1e-9;
+    if (std::abs(y.z()) > lean) {
       res.why = "baseline not horizontal (this cell keeps camera y along world Y)";
       return res;
     }
@@ -131,6 +141,46 @@ IkResult inverse_kinematics(const CellModel& c, const Eigen::Isometry3d& desired
         res.why = std::string(names[k]) + " out of its limits";
         return res;
       }
+    if (!c.nominal_table_axis()) {
+      // A calibrated axis tilted off world Z: polish the nominal solution with Gauss-Newton on the pose error
+      // (positions in mm, rotations in rad on a 1 m lever); five axes cannot follow a baseline the tilt has
+      // taken off the horizontal, so what remains is a rotation of at most the tilt.
+      const double tilt = std::acos(std::clamp(c.table_axis_direction.normalized().z(), -1.0, 1.0));
+      auto error = [&](const JointVector& x) {
+        const Eigen::Isometry3d now = forward_kinematics(c, x);
+        Eigen::Matrix<double, 6, 1> e;
+        e.head<3>() = desired.translation() - now.translation();
+        const Eigen::AngleAxisd w(Eigen::Quaterniond(desired.linear() * now.linear().transpose()).normalized());
+        e.tail<3>() = 1000.0 * w.angle() * w.axis();
+        return e;
+      };
+      for (int it = 0; it < 10; ++it) {
+        const Eigen::Matrix<double, 6, 1> e0 = error(q);
+        if (e0.norm() < 1e-10) break;
+        Eigen::Matrix<double, 6, 5> jac;
+        for (int k = 0; k < 5; ++k) {
+          JointVector a = q, b = q;
+          const double h = 1e-6;
+          a[k] += h;
+          b[k] -= h;
+          jac.col(k) = -(error(a) - error(b)) / (2 * h);
+        }
+        const Eigen::Matrix<double, 5, 1> dq = jac.completeOrthogonalDecomposition().solve(e0);
+        for (int k = 0; k < 5; ++k) q[k] += dq[k];
+        if (dq.norm() < 1e-12) break;
+      }
+      const Eigen::Isometry3d got = forward_kinematics(c, q);
+      const double rot = Eigen::AngleAxisd(got.linear().transpose() * desired.linear()).angle();
+      if ((got.translation() - desired.translation()).norm() > 1e-3 || rot > tilt + 1e-6) {
+        res.why = "not reachable with the calibrated turntable axis";
+        return res;
+      }
+      for (int k = 0; k < 5; ++k)
+        if (!within(c.axes[k], q[k])) {
+          res.why = std::string(names[k]) + " out of its limits";
+          return res;
+        }
+    }
     const Axis& sweep = c.axes[4];
     if (q[4] - 0.5 * scan_length_mm < sweep.min - kTol || q[4] + 0.5 * scan_length_mm > sweep.max + kTol) {
       res.why = "sweep cannot travel the scan length here";
@@ -156,7 +206,7 @@ IkResult inverse_kinematics(const CellModel& c, const Eigen::Isometry3d& desired
   for (double dtheta : {0.0, 0.35, -0.35, 0.7, -0.7, 1.2, -1.2}) {
     const auto theta = wrap_into(base_theta + dtheta, table.min, table.max, near[0]);
     if (!theta) continue;
-    const Eigen::Isometry3d flange = c.arm_base.inverse() * rot_z(*theta) * camera_to_table * c.tool.inverse();
+    const Eigen::Isometry3d flange = c.arm_base.inverse() * table_to_world(c, *theta) * camera_to_table * c.tool.inverse();
     const KDL::Frame target = to_kdl(flange);
     std::vector<KDL::JntArray> seeds;
     KDL::JntArray s0(6);

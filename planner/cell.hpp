@@ -55,6 +55,13 @@ struct CellModel {
   CellKinematics kinematics = CellKinematics::turntable_lift_tilt;
   std::vector<Axis> axes;                  // the order of every JointVector
   Eigen::Isometry3d object_on_table = Eigen::Isometry3d::Identity();  // object frame in the table frame
+  // The turntable's rotation axis in the world: nominally world Z through the origin; a calibration run
+  // (calibration/turntable_axis) measures the real one (a point on it, mm, and its unit direction).
+  Eigen::Vector3d table_axis_point_mm = Eigen::Vector3d::Zero();
+  Eigen::Vector3d table_axis_direction = Eigen::Vector3d::UnitZ();
+  bool nominal_table_axis() const {
+    return table_axis_point_mm.head<2>().isZero(0.0) && table_axis_direction == Eigen::Vector3d::UnitZ();
+  }
   Eigen::Vector3d camera_offset_mm = Eigen::Vector3d::Zero();         // turntable_lift_tilt: camera origin from the
                                                                       // tilt pivot, in the camera frame
   Box scanner_body;                        // in the camera frame, mm
@@ -83,7 +90,11 @@ struct IkResult {
   std::string why;  // when not ok: which axis or condition
 };
 
-/// Axis positions that put the camera at `camera_to_object` exactly (1e-9 mm/rad), within limits, with the
+/// The table frame in the world at turntable angle `angle_rad`: a rotation about the (calibrated) table axis.
+Eigen::Isometry3d table_to_world(const CellModel& cell, double angle_rad);
+
+/// Axis positions that put the camera at `camera_to_object` exactly (with a calibrated, tilted turntable axis:
+/// the nearest pose the five axes reach, Gauss-Newton from the nominal solution; off by at most the tilt) (1e-9 mm/rad), within limits, with the
 /// sweep able to travel ± scan_length/2 about its middle. `seed` guides the choice among solutions.
 IkResult inverse_kinematics(const CellModel& cell, const Eigen::Isometry3d& camera_to_object, double scan_length_mm,
                             const JointVector* seed = nullptr);

@@ -285,6 +285,15 @@ CellModel load_cell(const std::filesystem::path& file) {
   }
   c.object_on_table = pose_from(y, "object_offset_mm", "object_rpy_rad");
   if (y.has("camera_offset_mm")) c.camera_offset_mm = y.vec3("camera_offset_mm");
+  if (y.has("table_axis")) {
+    Section t = y.section("table_axis");
+    c.table_axis_point_mm = t.vec3("point_mm");
+    const Eigen::Vector3d d = t.vec3("direction");
+    if (!(d.norm() > 0.0) || d.normalized().z() < std::cos(0.1))
+      t.fail(t.key_path("direction"), "must be within 0.1 rad of world +Z (a turntable's axis), got a vector off by more");
+    c.table_axis_direction = d.normalized();
+    t.finish();
+  }
   {
     Section b = y.section("scanner_body");
     c.scanner_body = box_from(b);

@@ -76,7 +76,7 @@ struct SimCell : ::testing::Test {
     JobSettings s;
     s.scan_speed_mm_s = 400.0;
     s.jobs_dir = dir / "data" / "jobs";
-    auto heads = [this](const sp::TriangleMesh& scene, std::size_t object_triangles) {
+    auto heads = [this](const sp::TriangleMesh& scene, std::size_t object_triangles, const sp::CellModel&) {
       return make_sim_head(models.sensor, scene, object_triangles, 7);
     };
     return JobRunner(*journal, models, io->positioner, heads, s, [this](const Progress& p) {

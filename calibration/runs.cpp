@@ -1,0 +1,434 @@
+#include "calibration/runs.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <random>
+#include <sstream>
+
+#include <Eigen/Dense>
+#include <Eigen/Geometry>
+
+#include "calibration/fit.hpp"
+#include "planner/errors.hpp"
+
+namespace scancell::calibration {
+
+namespace sp = scancell::planner;
+using planner::DataError;
+
+namespace {
+
+std::string deg(double rad) {
+  std::ostringstream os;
+  os.precision(3);
+  os << std::fixed << rad * 180.0 / std::numbers::pi << "°";
+  return os.str();
+}
+
+/// The scan's valid samples: view-frame (camera_mm) and target-frame (object_mm) points with their pixel.
+struct Samples {
+  std::vector<Eigen::Vector3d> view, target;
+  std::vector<std::pair<int, int>> pixel;
+};
+
+Samples samples_of(const sp::RangeImage& img) {
+  Samples s;
+  for (int j = 0; j < img.rows; ++j)
+    for (int i = 0; i < img.columns; ++i) {
+      const auto& x = img.at(i, j);
+      if (!x.valid()) continue;
+      s.view.push_back(x.camera_mm.cast<double>());
+      s.target.push_back(x.object_mm.cast<double>());
+      s.pixel.emplace_back(i, j);
+    }
+  return s;
+}
+
+double tan_x(const sp::SensorModel& s, int i) { return std::tan(-0.5 * s.fov_x_rad + s.fov_x_rad * i / (s.samples_x - 1)); }
+
+/// Incidence angles of the virtual scanner (planner/virtual_scanner.cpp) for a plane normal `n` in the view
+/// frame (facing the camera) and laser ray i: θ_xz against the ray back to the laser, θ_yz in the laser plane.
+double theta_xz(const Eigen::Vector3d& n, double tx) {
+  const Eigen::Vector2d a(n.x(), n.z()), b(-tx, 1.0);
+  return std::acos(std::clamp(a.dot(b) / (a.norm() * b.norm()), -1.0, 1.0));
+}
+double theta_yz(const Eigen::Vector3d& n) { return std::atan2(std::abs(n.y()), n.z()); }
+
+/// Per-ray outcome on a known plane: for every pixel whose ray would hit the plane inside `inside` (target
+/// frame), within the sensor's range and facing laser and receiver, its θ_xz and whether a sample came back.
+struct RayOutcome {
+  double theta_xz;
+  bool returned;
+};
+
+template <class Inside>
+std::vector<RayOutcome> rays_on_plane(const sp::RangeImage& img, const sp::SensorModel& s, const Eigen::Vector3d& n_view,
+                                      const Eigen::Vector3d& p_view, Inside inside) {
+  std::vector<RayOutcome> out;
+  for (int j = 0; j < img.rows; ++j) {
+    const double y = -0.5 * img.pose.scan_length_mm + img.pose.scan_length_mm * j / (img.rows - 1);
+    const Eigen::Vector3d laser(0.0, y, 0.0), receiver(0.0, y + s.baseline_mm, 0.0);
+    for (int i = 0; i < img.columns; ++i) {
+      const double tx = tan_x(s, i);
+      const Eigen::Vector3d d(tx, 0.0, -1.0);
+      const double den = n_view.dot(d);
+      if (std::abs(den) < 1e-9) continue;
+      const double z = n_view.dot(p_view - laser) / den;
+      if (!(z > s.range_min_mm + 1.0 && z < s.range_max_mm - 1.0)) continue;
+      const Eigen::Vector3d hit = laser + z * d;
+      if (n_view.dot(laser - hit) <= 0.0 || n_view.dot(receiver - hit) <= 0.0) continue;
+      if (!inside(img.pose.camera_to_object * hit)) continue;
+      out.push_back({theta_xz(n_view, tx), img.at(i, j).valid()});
+    }
+  }
+  return out;
+}
+
+Eigen::Vector3d oriented(Eigen::Vector3d n, const Eigen::Vector3d& towards) { return n.dot(towards) < 0.0 ? -n : n; }
+
+}  // namespace
+
+sp::JointVector look_at(const sp::CellModel& cell, const Eigen::Vector3d& p, double standoff, double tilt, double table,
+                        double scan_length, const std::string& what) {
+  const Eigen::Isometry3d object_to_world = sp::table_to_world(cell, table) * cell.object_on_table;
+  const Eigen::Vector3d z(std::cos(tilt), 0.0, std::sin(tilt)), y = Eigen::Vector3d::UnitY();
+  Eigen::Isometry3d camera_to_world = Eigen::Isometry3d::Identity();
+  camera_to_world.linear().col(0) = y.cross(z);
+  camera_to_world.linear().col(1) = y;
+  camera_to_world.linear().col(2) = z;
+  camera_to_world.translation() = object_to_world * p + standoff * z;
+  const sp::IkResult ik = sp::inverse_kinematics(cell, object_to_world.inverse() * camera_to_world, scan_length);
+  if (!ik.ok) throw DataError(what + ": the cell cannot reach the scan pose (" + ik.why + ")");
+  return ik.q;
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// Sensor: C_z from a plate across the range, t_xz from the plate at grazing tilts, t_yz from a ramp turned on
+// the turntable (θ_yz of a line scan is set by the surface alone, so the ramp's slope seen along the camera's
+// y is what varies it).
+
+SensorResult run_sensor(const RunContext& ctx, const SensorRunOptions& o) {
+  const sp::SensorModel& s = ctx.sensor;
+  SensorResult r;
+  const double plate_side = kPlateSideMm, plate_t = kPlateThicknessMm;
+  const Eigen::Vector3d plate_centre(0.0, 0.0, plate_t);
+  auto on_plate = [&](const Eigen::Vector3d& t) {
+    return std::abs(t.x()) < 0.5 * plate_side - 3.0 && std::abs(t.y()) < 0.5 * plate_side - 3.0 && std::abs(t.z() - plate_t) < 1.0;
+  };
+
+  // 1. Depth noise against range: the residuals of each plate scan normal to its fitted plane, with the
+  //    (model) lateral noise's share removed, give σz at that depth; σz = C_z z² by least squares.
+  std::vector<double> z2, sig;
+  for (int k = 0; k < o.standoffs; ++k) {
+    const double span = s.range_max_mm - s.range_min_mm;
+    const double standoff = s.range_min_mm + span * (0.1 + 0.75 * k / std::max(1, o.standoffs - 1));
+    const std::string what = "noise scan " + std::to_string(k + 1) + " at stand-off " + std::to_string(static_cast<int>(standoff)) + " mm";
+    // The table turned half a turn: the ramp stands on the far side, out of the plate's rays.
+    const sp::JointVector q = look_at(ctx.cell, plate_centre - Eigen::Vector3d(o.plate_aim_x_mm, 0, 0), standoff, o.plate_tilt_rad,
+                                      std::numbers::pi, o.scan_length_mm, what);
+    const sp::RangeImage img = ctx.scan(q, o.scan_length_mm);
+    ++r.scans;
+    Samples smp = samples_of(img);
+    std::vector<Eigen::Vector3d> pts;
+    for (std::size_t i = 0; i < smp.view.size(); ++i)
+      if (on_plate(smp.target[i])) pts.push_back(smp.view[i]);
+    if (pts.size() < 1000)
+      throw DataError(what + ": " + std::to_string(pts.size()) + " samples on the plate (at least 1000 needed; is the plate on the table?)");
+    PlaneFit f = fit_plane(pts, what);
+    f.normal = oriented(f.normal, -f.point);
+    double acc = 0.0;
+    std::vector<double> depths;
+    for (const auto& p : pts) {
+      const double z = -p.z();
+      depths.push_back(z);
+      const double res = (p - f.point).dot(f.normal);
+      const double lateral = std::pow(f.normal.x() * s.noise_cx * z, 2) + std::pow(f.normal.y() * s.noise_cy * z, 2);
+      acc += (res * res - lateral) / (f.normal.z() * f.normal.z() * z * z * z * z);
+    }
+    std::nth_element(depths.begin(), depths.begin() + static_cast<long>(depths.size() / 2), depths.end());
+    const double zm = depths[depths.size() / 2];
+    const double c2 = acc / static_cast<double>(pts.size() - 3);
+    if (!(c2 > 0.0)) throw DataError(what + ": no depth noise left after the lateral share (plate not flat?)");
+    const double sigma = std::sqrt(c2) * zm * zm;
+    r.noise.push_back({zm, sigma, pts.size()});
+    z2.push_back(zm * zm);
+    sig.push_back(sigma);
+    ctx.log(what + ": depth " + std::to_string(zm) + " mm, sigma_z " + std::to_string(sigma) + " mm from " + std::to_string(pts.size()) + " samples");
+  }
+  const ProportionalFit cz = fit_proportional(z2, sig, "C_z fit");
+  r.cz_per_mm = {cz.k, std::max(cz.ci95(), 1.96 * cz.k / std::sqrt(2.0 * static_cast<double>(r.noise.front().samples)))};
+  r.noise_fit_rms_mm = cz.rms;
+
+  // 2. t_xz: the plate seen ever more obliquely; within a scan θ_xz sweeps across the fan, so the threshold
+  //    is the edge between rays that return and rays that do not.
+  std::vector<RayOutcome> xz;
+  for (int k = 0; k < o.t_xz_tilts; ++k) {
+    const double boresight = s.grazing_xz_rad + 0.2 * (k - 0.5 * (o.t_xz_tilts - 1));  // from the plate normal
+    const double tilt = 0.5 * std::numbers::pi - boresight;
+    const std::string what = "grazing scan " + std::to_string(k + 1) + " (boresight " + deg(boresight) + " from the plate normal)";
+    const sp::JointVector q = look_at(ctx.cell, plate_centre, 0.5 * (s.range_min_mm + s.range_max_mm) * 0.8, tilt,
+                                      std::numbers::pi, o.scan_length_mm, what);
+    const sp::RangeImage img = ctx.scan(q, o.scan_length_mm);
+    ++r.scans;
+    Samples smp = samples_of(img);
+    std::vector<Eigen::Vector3d> pts;
+    for (std::size_t i = 0; i < smp.view.size(); ++i)
+      if (on_plate(smp.target[i])) pts.push_back(smp.view[i]);
+    // The plane from the samples where there are enough, else from the model: the plate's top in the view.
+    Eigen::Vector3d n, p;
+    if (pts.size() >= 200) {
+      const PlaneFit f = fit_plane(pts, what);
+      n = oriented(f.normal, -f.point);
+      p = f.point;
+    } else {
+      const Eigen::Isometry3d to_view = img.pose.camera_to_object.inverse();
+      n = to_view.linear() * Eigen::Vector3d::UnitZ();
+      p = to_view * plate_centre;
+    }
+    const auto rays = rays_on_plane(img, s, n, p, on_plate);
+    xz.insert(xz.end(), rays.begin(), rays.end());
+  }
+  {
+    double returned_max = -1.0, missing_min = 10.0;
+    std::size_t returned = 0, missing = 0;
+    for (const auto& x : xz) {
+      if (x.returned) {
+        returned_max = std::max(returned_max, x.theta_xz);
+        ++returned;
+      } else {
+        missing_min = std::min(missing_min, x.theta_xz);
+        ++missing;
+      }
+    }
+    if (returned < 100 || missing < 100)
+      throw DataError("t_xz: the grazing scans do not straddle the threshold (" + std::to_string(returned) + " rays returned, " +
+                      std::to_string(missing) + " missing; expected around " + deg(s.grazing_xz_rad) + ")");
+    if (missing_min < returned_max) {
+      // Overlap (noise at the edge): the threshold that misclassifies the fewest rays.
+      std::vector<RayOutcome> sorted = xz;
+      std::sort(sorted.begin(), sorted.end(), [](const RayOutcome& x, const RayOutcome& y) { return x.theta_xz < y.theta_xz; });
+      long wrong = static_cast<long>(returned), best_wrong = wrong;  // threshold below every ray: all returned are wrong
+      std::size_t best = 0;
+      for (std::size_t i = 0; i + 1 < sorted.size(); ++i) {
+        wrong += sorted[i].returned ? -1 : 1;
+        if (wrong < best_wrong) {
+          best_wrong = wrong;
+          best = i;
+        }
+      }
+      returned_max = sorted[best].theta_xz;
+      missing_min = sorted[best + 1].theta_xz;
+    }
+    r.t_xz_rad = {0.5 * (returned_max + missing_min), std::max(0.5 * (missing_min - returned_max), 1e-4)};
+    ctx.log("t_xz " + deg(r.t_xz_rad.value) + " ± " + deg(r.t_xz_rad.ci95) + " from " + std::to_string(xz.size()) + " rays");
+  }
+
+  // 3. t_yz: the ramp turned on the table; each scan's yield (rays with θ_xz safely below t_xz that return),
+  //    then bisection on the table angle where the yield falls through the threshold.
+  const Ramp ramp = o.ramp;
+  auto on_face = [&](const Eigen::Vector3d& t) { return on_ramp_face(ramp, t, 3.0, 1.0); };
+  const double standoff = s.range_min_mm + 0.3 * (s.range_max_mm - s.range_min_mm);
+  auto ramp_scan = [&](double table) -> std::pair<double, double> {
+    const std::string what = "ramp scan at table " + deg(table);
+    const sp::JointVector q = look_at(ctx.cell, ramp.centre(), standoff, o.ramp_tilt_rad, table, 40.0, what);
+    const sp::RangeImage img = ctx.scan(q, 40.0);
+    ++r.scans;
+    const Eigen::Isometry3d to_view = img.pose.camera_to_object.inverse();
+    Eigen::Vector3d n = to_view.linear() * ramp.normal(), p = to_view * ramp.centre();
+    Samples smp = samples_of(img);
+    std::vector<Eigen::Vector3d> pts;
+    for (std::size_t i = 0; i < smp.view.size(); ++i)
+      if (on_face(smp.target[i])) pts.push_back(smp.view[i]);
+    if (pts.size() >= 200) {
+      const PlaneFit f = fit_plane(pts, what);
+      n = oriented(f.normal, n);
+      p = f.point;
+    }
+    std::size_t eligible = 0, returned = 0;
+    for (const auto& x : rays_on_plane(img, s, n, p, on_face))
+      if (x.theta_xz < r.t_xz_rad.value - 0.03) {
+        ++eligible;
+        returned += x.returned;
+      }
+    if (eligible < 100)
+      throw DataError(what + ": only " + std::to_string(eligible) + " rays reach the ramp's face below t_xz (is the ramp on the table?)");
+    const double y = static_cast<double>(returned) / static_cast<double>(eligible), th = theta_yz(n);
+    r.yield_vs_theta_yz.emplace_back(th, y);
+    ctx.log(what + ": theta_yz " + deg(th) + ", yield " + std::to_string(y));
+    return {th, y};
+  };
+  double lo = 0.0, hi = 0.0;  // table angles: at lo the ramp does not measure (steep), at hi it does
+  double th_lo = 0.0, th_hi = 0.0;
+  bool bracketed = false;
+  auto [th_prev, y_prev] = ramp_scan(0.0);
+  if (y_prev >= o.yield_threshold)
+    throw DataError("t_yz: the ramp at its steepest (" + deg(th_prev) + ") still measures: t_yz is above the ramp's slope");
+  // Turning the table this way lowers θ_yz while the camera's own tilt keeps θ_xz moderate (the other way
+  // the two add up and θ_xz passes t_xz first).
+  for (int k = 1; k <= 9 && !bracketed; ++k) {
+    const double table = -k * 10.0 * std::numbers::pi / 180.0;
+    const auto [th, y] = ramp_scan(table);
+    if (y >= o.yield_threshold) {
+      lo = table + 10.0 * std::numbers::pi / 180.0;
+      hi = table;
+      th_lo = th_prev;
+      th_hi = th;
+      bracketed = true;
+    }
+    th_prev = th;
+  }
+  if (!bracketed) throw DataError("t_yz: no ramp scan measured down to θ_yz " + deg(th_prev));
+  for (int b = 0; b < o.t_yz_bisections; ++b) {
+    const double mid = 0.5 * (lo + hi);
+    const auto [th, y] = ramp_scan(mid);
+    if (y >= o.yield_threshold) {
+      hi = mid;
+      th_hi = th;
+    } else {
+      lo = mid;
+      th_lo = th;
+    }
+  }
+  r.t_yz_rad = {0.5 * (th_lo + th_hi), std::max(0.5 * std::abs(th_lo - th_hi), 1e-4)};
+  ctx.log("t_yz " + deg(r.t_yz_rad.value) + " ± " + deg(r.t_yz_rad.ci95));
+  return r;
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// Turntable axis: one sphere off the axis, a fixed camera, N table angles; the sphere's centres (in the world,
+// through the camera's own pose, which the table does not move) lie on a circle about the axis.
+
+AxisResult run_turntable_axis(const RunContext& ctx, const AxisRunOptions& o) {
+  if (o.target.centres.size() != 1) throw DataError("turntable axis run: the target must be one sphere");
+  AxisResult r;
+  const Eigen::Vector3d c0 = o.target.centres.front();
+  const Eigen::Vector3d aim(0.0, 0.0, c0.z());  // on the axis at the sphere's height: the camera never moves
+  double sphere_ss = 0.0;
+  std::size_t sphere_n = 0;
+  for (int k = 0; k < o.angles; ++k) {
+    const double table = -std::numbers::pi + 2.0 * std::numbers::pi * k / o.angles;
+    const std::string what = "sphere scan at table " + deg(table);
+    const sp::JointVector q = look_at(ctx.cell, aim, o.standoff_mm, o.camera_tilt_rad, table, o.scan_length_mm, what);
+    const sp::RangeImage img = ctx.scan(q, o.scan_length_mm);
+    ++r.scans;
+    const Samples smp = samples_of(img);
+    std::vector<Eigen::Vector3d> pts;
+    for (const auto& t : smp.target)
+      if ((t - c0).norm() < o.target.radius_mm + 5.0) pts.push_back(t);
+    const SphereFit f = fit_sphere(pts, what, o.target.radius_mm);
+    sphere_ss += f.rms * f.rms * static_cast<double>(f.n);
+    sphere_n += f.n;
+    // Target frame → world with the model's table angle: the samples came through the model's kinematics, so
+    // this undoes exactly what produced them and leaves the camera's world pose, which the table cannot move.
+    r.centres_world_mm.push_back(sp::table_to_world(ctx.cell, q[0]) * ctx.cell.object_on_table * f.centre);
+  }
+  const CircleFit c = fit_circle(r.centres_world_mm, "turntable axis circle");
+  r.direction = c.normal.z() < 0.0 ? Eigen::Vector3d(-c.normal) : c.normal;
+  r.point_mm = c.centre - (c.centre.z() / r.direction.z()) * r.direction;
+  r.circle_radius_mm = c.radius;
+  r.circle_rms_mm = c.rms;
+  r.sphere_rms_mm = sphere_n ? std::sqrt(sphere_ss / static_cast<double>(sphere_n)) : 0.0;
+  const double spread = std::sqrt(0.5 * static_cast<double>(o.angles));
+  r.direction_ci95_rad = 1.96 * c.rms / (c.radius * spread);
+  r.point_ci95_mm = 1.96 * c.rms / spread * (1.0 + c.centre.z() / c.radius);
+  ctx.log("axis direction " + std::to_string(r.direction.x()) + " " + std::to_string(r.direction.y()) + " " +
+          std::to_string(r.direction.z()) + ", point " + std::to_string(r.point_mm.x()) + " " + std::to_string(r.point_mm.y()) +
+          ", circle r " + std::to_string(c.radius) + " rms " + std::to_string(c.rms));
+  return r;
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// Positioner repeatability: return to each measuring pose from a different detour each time; the tripod's
+// three sphere centres fix each return's achieved pose relative to the mean of the returns (thesis 7.2.4:
+// σ_p the camera position, σ_a its boresight direction, σ_t the twist about it).
+
+PositionerResult run_positioner(const RunContext& ctx, const PositionerRunOptions& o) {
+  if (o.target.centres.size() != 3) throw DataError("positioner run: the target must be three spheres");
+  if (o.repeats < 3) throw DataError("positioner run: at least 3 repeats per pose");
+  PositionerResult r;
+  std::mt19937_64 rng(o.seed);
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  for (const auto& c : o.target.centres) centroid += c / 3.0;
+  double ss_p = 0.0, ss_a = 0.0, ss_t = 0.0, sphere_ss = 0.0;
+  std::size_t sphere_n = 0;
+  int dof = 0;
+  const sp::JointVector home = ctx.cell.home();
+  for (int k = 0; k < o.poses; ++k) {
+    const double table = 2.0 * std::numbers::pi * k / o.poses - std::numbers::pi / 2;
+    const double tilt = k % 2 ? 1.05 : 1.15;
+    const std::string what = "positioner pose " + std::to_string(k + 1);
+    const sp::JointVector q = look_at(ctx.cell, centroid, o.standoff_mm, tilt, table, o.scan_length_mm, what);
+    std::vector<std::array<Eigen::Vector3d, 3>> measured;
+    Eigen::Isometry3d nominal = Eigen::Isometry3d::Identity();
+    for (int m = 0; m < o.repeats; ++m) {
+      // A detour from a random direction: every axis off by up to a tenth of its travel, around home.
+      sp::JointVector detour = home;
+      for (std::size_t a = 0; a < detour.size(); ++a) {
+        const auto& ax = ctx.cell.axes[a];
+        std::uniform_real_distribution<double> u(-0.1, 0.1);
+        detour[a] = std::clamp(home[a] + u(rng) * (ax.max - ax.min), ax.min, ax.max);
+      }
+      ctx.move(detour);
+      const sp::RangeImage img = ctx.scan(q, o.scan_length_mm);
+      ++r.scans;
+      nominal = img.pose.camera_to_object;
+      const Samples smp = samples_of(img);
+      std::array<std::vector<Eigen::Vector3d>, 3> groups;
+      for (const auto& t : smp.target)
+        for (int i = 0; i < 3; ++i)
+          if ((t - o.target.centres[static_cast<std::size_t>(i)]).norm() < o.target.radius_mm + 6.0) groups[static_cast<std::size_t>(i)].push_back(t);
+      std::array<Eigen::Vector3d, 3> centres;
+      for (int i = 0; i < 3; ++i) {
+        const SphereFit f = fit_sphere(groups[static_cast<std::size_t>(i)], what + " repeat " + std::to_string(m + 1) + " sphere " + std::to_string(i + 1), o.target.radius_mm);
+        centres[static_cast<std::size_t>(i)] = f.centre;
+        sphere_ss += f.rms * f.rms * static_cast<double>(f.n);
+        sphere_n += f.n;
+      }
+      measured.push_back(centres);
+    }
+    std::array<Eigen::Vector3d, 3> mean{Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()};
+    for (const auto& c : measured)
+      for (int i = 0; i < 3; ++i) mean[static_cast<std::size_t>(i)] += c[static_cast<std::size_t>(i)] / static_cast<double>(measured.size());
+    // A line scan with a pose error is not a rigid copy of the object: the camera's rotation error r is
+    // fixed in the camera frame, which slides along its y during the sweep, so every profile turns about its
+    // own laser origin. To first order a point c of the view frame (camera at mid-sweep) is measured at
+    //   m = c + c⊥ × ω + b,   c⊥ = (c_x, 0, c_z),  ω the rotation vector of r,  b = −e (e: position error),
+    // which is linear in (ω, b): three sphere centres at different depths and across the profile fix all six.
+    const Eigen::Isometry3d to_view = nominal.inverse();
+    std::array<Eigen::Vector3d, 3> ref;
+    for (int i = 0; i < 3; ++i) ref[static_cast<std::size_t>(i)] = to_view * mean[static_cast<std::size_t>(i)];
+    for (const auto& c : measured) {
+      Eigen::Matrix<double, 9, 6> a = Eigen::Matrix<double, 9, 6>::Zero();
+      Eigen::Matrix<double, 9, 1> rhs;
+      for (int i = 0; i < 3; ++i) {
+        const Eigen::Vector3d& rc = ref[static_cast<std::size_t>(i)];
+        const Eigen::Vector3d perp(rc.x(), 0.0, rc.z());
+        Eigen::Matrix3d skew;
+        skew << 0, -perp.z(), perp.y(), perp.z(), 0, -perp.x(), -perp.y(), perp.x(), 0;
+        a.block<3, 3>(3 * i, 0) = skew;
+        a.block<3, 3>(3 * i, 3) = Eigen::Matrix3d::Identity();
+        rhs.segment<3>(3 * i) = to_view * c[static_cast<std::size_t>(i)] - rc;
+      }
+      const Eigen::Matrix<double, 6, 1> x = a.colPivHouseholderQr().solve(rhs);
+      if (!x.allFinite()) throw DataError(what + ": the three sphere centres do not fix the pose (collinear?)");
+      ss_p += x.tail<3>().squaredNorm();
+      ss_a += x(0) * x(0) + x(1) * x(1);  // boresight tilt: rotation about the camera's x and y
+      ss_t += x(2) * x(2);                // twist about the boresight
+    }
+    dof += o.repeats - 1;  // one mean per pose
+  }
+  auto est = [&](double ss) {
+    const double sigma = std::sqrt(ss / dof);
+    return Estimate{sigma, 1.96 * sigma / std::sqrt(2.0 * dof)};
+  };
+  r.sigma_p_mm = est(ss_p);
+  r.sigma_a_rad = est(ss_a);
+  r.sigma_t_rad = est(ss_t);
+  r.sphere_rms_mm = sphere_n ? std::sqrt(sphere_ss / static_cast<double>(sphere_n)) : 0.0;
+  ctx.log("sigma_p " + std::to_string(r.sigma_p_mm.value) + " mm, sigma_a " + deg(r.sigma_a_rad.value) + ", sigma_t " +
+          deg(r.sigma_t_rad.value) + " from " + std::to_string(r.scans) + " scans");
+  return r;
+}
+
+}  // namespace scancell::calibration

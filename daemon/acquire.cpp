@@ -1,0 +1,111 @@
+#include "daemon/acquire.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <thread>
+
+#include "planner/cell.hpp"
+#include "planner/errors.hpp"
+
+namespace scancell::daemon {
+
+namespace sp = scancell::planner;
+namespace dr = scancell::drivers;
+using Clock = std::chrono::steady_clock;
+
+Acquisition acquire_view(dr::Positioner& positioner, ScanHead& head, const sp::CellModel& cell,
+                         const sp::SensorModel& sensor, const sp::JointVector& q, double L, const JobSettings& settings,
+                         const std::atomic<int>& stop, const std::function<void(const std::string&)>& phase) {
+  if (q.size() != cell.axes.size())
+    throw sp::DataError(std::to_string(q.size()) + " axis targets for a cell of " + std::to_string(cell.axes.size()) + " axes");
+  const std::size_t sweep = cell.axis_index("sweep");
+  const double mid = q[sweep], start = mid - 0.5 * L, end = mid + 0.5 * L;
+  const int n_rows = sensor.samples_y, n_cols = sensor.samples_x;
+  if (phase) phase("moving");
+  // 1. Move to the start of the sweep, every axis together.
+  std::map<std::string, double> targets;
+  for (std::size_t a = 0; a < cell.axes.size(); ++a) targets[cell.axes[a].name] = a == sweep ? start : q[a];
+  positioner.move(targets, settings.move_timeout);
+  head.moved();
+
+  // 2. Sweep at the scan speed; fire one profile each time the sweep passes the next profile's position
+  //    (software position compare, as a drive's position-compare output would in hardware). The pose of each
+  //    profile is the kinematics at the position read back: what the camera really did, not what was planned.
+  const double speed = settings.scan_speed_mm_s > 0.0 ? settings.scan_speed_mm_s : cell.scan_speed_mm_s;
+  const double pitch = L / (n_rows - 1);
+  const auto sweep_timeout = std::chrono::milliseconds(static_cast<long>(2000.0 * L / speed)) + settings.move_timeout;
+  if (phase) phase("scanning");
+  dr::Axis& sweep_axis = positioner.axis("sweep");
+  std::vector<double> qs = q;
+  std::vector<int> fired_rows;
+  std::vector<Eigen::Isometry3d> fired_pose;
+  int next = 0;
+  auto fire_up_to = [&](double y) {
+    // Positions come back in drive counts (1 µm): a profile is due within half a count of its place.
+    constexpr double kCount = 5e-4;
+    if (next >= n_rows || y < start + next * pitch - kCount) return;
+    // Rows passed since the last read are lost; fire for the latest one only, at the position read.
+    const int row = std::min(n_rows - 1, static_cast<int>(std::floor((y - start + kCount) / pitch)));
+    qs[sweep] = y;
+    const Eigen::Isometry3d pose = sp::forward_kinematics(cell, qs);
+    head.camera_at(qs, pose);
+    head.trigger().set(true);
+    if (settings.trigger_width.count() > 0) std::this_thread::sleep_for(settings.trigger_width);
+    head.trigger().set(false);
+    fired_rows.push_back(row);
+    fired_pose.push_back(pose);
+    next = row + 1;
+  };
+  fire_up_to(sweep_axis.state().position);
+  positioner.begin_move("sweep", end, speed);
+  const auto deadline = Clock::now() + sweep_timeout;
+  while (true) {
+    const auto why = static_cast<StopRequest>(stop.load());
+    if (why != StopRequest::none) {
+      sweep_axis.halt();
+      throw Interrupted(why, "during a sweep (its partial scan is discarded)");
+    }
+    const dr::AxisState st = sweep_axis.state();
+    if (st.faulted) break;  // finish_move reports the drive's fault
+    fire_up_to(st.position);
+    if (!st.moving && st.in_position) break;
+    if (Clock::now() > deadline) break;  // finish_move times out with a halt
+    std::this_thread::sleep_for(std::chrono::microseconds(50));
+  }
+  sweep_axis.finish_move(end, std::chrono::milliseconds(std::max<long>(100, std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count())));
+  fire_up_to(sweep_axis.state().position);
+
+  // 3. Collect the profiles into the range image of the view (the nominal pose at mid-sweep; samples carry
+  //    their own measured positions in both frames).
+  sp::RangeImage img;
+  img.kind = sensor.kind;
+  img.columns = n_cols;
+  img.rows = n_rows;
+  qs[sweep] = mid;
+  img.pose.camera_to_object = sp::forward_kinematics(cell, qs);
+  img.pose.scan_length_mm = L;
+  img.samples.assign(static_cast<std::size_t>(n_cols) * n_rows, sp::RangeSample{});
+  const Eigen::Isometry3d object_to_view = img.pose.camera_to_object.inverse();
+  for (std::size_t k = 0; k < fired_rows.size(); ++k) {
+    const dr::Profile prof = head.scanner().acquire(std::chrono::milliseconds(2000));
+    if (prof.samples.size() != static_cast<std::size_t>(n_cols))
+      throw dr::DriverError(dr::DriverError::Kind::protocol, "scanner", "profile " + std::to_string(prof.index),
+                            std::to_string(prof.samples.size()) + " samples, the sensor model has " + std::to_string(n_cols));
+    for (int i = 0; i < n_cols; ++i) {
+      sp::RangeSample s = prof.samples[static_cast<std::size_t>(i)];
+      if (!s.valid()) continue;
+      // The scanner reports points in its own frame; where they are on the object is what the cell model
+      // says the camera's pose was (the position read back at the trigger): a model error shows up here.
+      s.object_mm = (fired_pose[k] * s.camera_mm.cast<double>()).cast<float>();
+      s.camera_mm = (object_to_view * s.object_mm.cast<double>()).cast<float>();
+      img.samples[static_cast<std::size_t>(fired_rows[k]) * n_cols + i] = s;
+    }
+  }
+  Acquisition out;
+  out.lost_profiles = n_rows - static_cast<int>(fired_rows.size());
+  out.image = std::move(img);
+  return out;
+}
+
+}  // namespace scancell::daemon
