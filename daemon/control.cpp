@@ -35,6 +35,7 @@ const std::map<std::string, std::map<std::string, Field>>& schema() {
       {"resume", {{"job", {Type::integer, true}}}},
       {"abort", {{"job", {Type::integer, true}}}},
       {"reload", {}},
+      {"calibrate", {{"kind", {Type::string, true}}}},
   };
   return s;
 }

@@ -12,6 +12,7 @@
 //   watch    job (integer)            — the reply is followed by event lines until the job ends
 //   pause | resume | abort   job (integer)
 //   reload   —
+//   calibrate  kind (string: sensor | turntable_axis | positioner)
 #include <atomic>
 #include <filesystem>
 #include <functional>

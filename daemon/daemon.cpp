@@ -5,6 +5,8 @@
 
 #include <signal.h>
 
+#include "calibration/results.hpp"
+#include "daemon/calibration_job.hpp"
 #include "planner/errors.hpp"
 
 namespace scancell::daemon {
@@ -81,11 +83,27 @@ void Daemon::job_loop() {
                                          const planner::CellModel& placed) {
       return make_sim_head(models.sensor, scene, object_triangles, seed, &placed, truth ? &*truth : nullptr);
     };
-    JobRunner runner(*journal_, models, io_->positioner, heads, config_.jobs, [this](const Progress& p) { report(p); });
     stop_ = 0;
     current_ = *id;
     notifier_.status("job " + std::to_string(*id) + " running");
-    const JobState end = runner.run(*id, stop_);
+    JobState end;
+    const json request = json::parse(journal_->job(*id).request_json);
+    if (request.contains("calibrate")) {
+      const std::string kind = request["calibrate"].get<std::string>();
+      end = run_calibration_job(*journal_, *id, kind, models, io_->positioner, heads, config_.jobs,
+                                config_.data_dir / "calibration", stop_, [this](const Progress& p) { report(p); });
+      if (end == JobState::done) {
+        // The new values take effect for the jobs that follow.
+        const json result = json::parse(journal_->job(*id).result_json);
+        std::lock_guard<std::mutex> lock(config_mu_);
+        calibration::apply_calibration(calibration::load_calibration(result["file"].get<std::string>()), config_.models.sensor,
+                                       config_.models.cell);
+        config_.calibration_applied.push_back(result["file"].get<std::string>());
+      }
+    } else {
+      JobRunner runner(*journal_, models, io_->positioner, heads, config_.jobs, [this](const Progress& p) { report(p); });
+      end = runner.run(*id, stop_);
+    }
     current_ = 0;
     notifier_.status("idle (job " + std::to_string(*id) + " " + to_string(end) + ")");
     if (running_ && finished(end)) {
@@ -234,6 +252,10 @@ json Daemon::handle(const json& req, const std::function<bool(const json&)>& sen
     }
     const std::int64_t cur = current_;
     json o = {{"daemon", cur ? "busy" : "idle"}, {"job", cur}};
+    {
+      std::lock_guard<std::mutex> lock(config_mu_);
+      o["calibration"] = config_.calibration_applied;
+    }
     std::lock_guard<std::mutex> lock(events_mu_);
     if (cur && last_.job == cur) o["progress"] = progress_json(last_);
     return o;
@@ -296,6 +318,13 @@ json Daemon::handle(const json& req, const std::function<bool(const json&)>& sen
     journal_->set_state(j.id, JobState::queued, "resumed");
     wake_.notify_all();
     return {{"job", j.id}, {"state", "queued"}};
+  }
+  if (cmd == "calibrate") {
+    const std::string kind = req["kind"].get<std::string>();
+    check_calibration_kind(kind);
+    const std::int64_t id = journal_->create_job("calibration:" + kind, json({{"calibrate", kind}}).dump());
+    wake_.notify_all();
+    return {{"job", id}, {"state", "queued"}, {"kind", kind}};
   }
   if (cmd == "reload") {
     std::lock_guard<std::mutex> lock(config_mu_);

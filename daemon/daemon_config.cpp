@@ -3,6 +3,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "calibration/results.hpp"
 #include "planner/yaml_section.hpp"
 
 namespace scancell::daemon {
@@ -115,13 +116,26 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
   bool sweep = false;
   for (const auto& a : c.models.cell.axes) sweep = sweep || a.name == "sweep";
   if (!sweep) y.fail("cell", "cell '" + c.models.cell.name + "' has no 'sweep' axis; line-scan execution needs one");
+  apply_calibrations(c, c.models.sensor, c.models.cell);
   return c;
+}
+
+void apply_calibrations(DaemonConfig& c, sp::SensorModel& sensor, sp::CellModel& cell) {
+  std::vector<fs::path> files = c.calibration_files;
+  for (const auto& f : calibration::latest_calibrations(c.data_dir / "calibration")) files.push_back(f);
+  c.calibration_applied.clear();
+  for (const auto& f : files) {
+    calibration::apply_calibration(calibration::load_calibration(f), sensor, cell);
+    c.calibration_applied.push_back(f.string());
+  }
 }
 
 std::vector<std::string> reload_calibration(DaemonConfig& c) {
   // Load everything first: a bad file leaves the running models untouched.
-  const sp::SensorModel sensor = sp::load_sensor(c.sensor_file);
-  const sp::CellModel cell = sp::load_cell(c.cell_file);
+  sp::SensorModel sensor = sp::load_sensor(c.sensor_file);
+  sp::CellModel cell = sp::load_cell(c.cell_file);
+  DaemonConfig trial = c;
+  apply_calibrations(trial, sensor, cell);
   std::vector<std::string> changes;
   auto differ = [](const std::string& a, const std::string& b) { return a != b; };
   std::ostringstream before, after;
@@ -138,8 +152,12 @@ std::vector<std::string> reload_calibration(DaemonConfig& c) {
     if (!fs::exists(f)) throw sp::ConfigError(f.string() + ": calibration file vanished");
   if (cell.axes.size() != c.models.cell.axes.size())
     throw sp::ConfigError(c.cell_file.string() + ": axes changed; restart the daemon to change the cell's axes");
+  if ((cell.table_axis_point_mm - c.models.cell.table_axis_point_mm).norm() > 0.0 ||
+      (cell.table_axis_direction - c.models.cell.table_axis_direction).norm() > 0.0)
+    changes.push_back("cell " + c.cell_file.string() + ": turntable axis changed");
   c.models.sensor = sensor;
   c.models.cell = cell;
+  c.calibration_applied = trial.calibration_applied;
   return changes;
 }
 

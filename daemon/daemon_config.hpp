@@ -27,6 +27,8 @@ struct DaemonConfig {
   JobSettings jobs;
   std::chrono::milliseconds home_timeout{60000};
 
+  std::vector<std::string> calibration_applied;  // files applied at start or reload, in order
+
   // Loaded from the files above.
   CellModels models;
   drivers::DriverSetup drivers;
@@ -35,6 +37,10 @@ struct DaemonConfig {
 /// Reads the config and every file it names. `data_dir` / `socket` override the file's values when not empty.
 DaemonConfig load_daemon_config(const std::filesystem::path& file, const std::string& data_dir = "",
                                 const std::string& socket = "");
+
+/// The calibration in force: `calibration` files of the config, then the newest result of each kind in
+/// DATA_DIR/calibration/ (the daemon's own runs), applied in that order to the sensor and cell models.
+void apply_calibrations(DaemonConfig& config, planner::SensorModel& sensor, planner::CellModel& cell);
 
 /// Re-reads the calibration-bearing files (sensor model, cell model with its pose-error model) for SIGHUP;
 /// returns what changed, one line per change; throws ConfigError and leaves `config` untouched when a file

@@ -36,4 +36,7 @@ set -e
 T1=$(date +%s.%N)
 awk -v a="$T0" -v b="$T1" 'BEGIN { printf "  %-34s %.1f s\n", "demo wall time (all of it)", b - a }'
 echo "  journal: $D/data/journal.sqlite   daemon log: $D/scancelld.log"
-exit $RC
+# Done, or stalled on a sliver the rough model promised and no view delivered (reported above): the job ran
+# end to end either way. Anything else is a failure of the demo.
+[ "$RC" = 0 ] || [ "$RC" = 10 ] || exit "$RC"
+exit 0

@@ -7,12 +7,14 @@
 #include <iostream>
 #include <map>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <vector>
 
 #include <tbb/info.h>
 #include <tbb/task_arena.h>
 
+#include "calibration/results.hpp"
 #include "planner/errors.hpp"
 #include "planner/plan.hpp"
 #include "planner/plan_file.hpp"
@@ -42,6 +44,7 @@ const char* kPlanUsage =
     "  --threads N               worker threads (default all cores; the plan does not depend on it)\n"
     "  --cell CELL.yaml          plan for this cell (config/cells): reachable, collision-free views with their\n"
     "                            axis targets, in the order of least travel\n"
+    "  --calibration F[,F]       apply calibration result files (docs/calibration.md) to the sensor and cell\n"
     "  --quiet                   no summary table\n";
 
 const char* kVerifyUsage =
@@ -122,13 +125,14 @@ void write_json(const std::string& out, const nlohmann::json& j) {
 int cmd_plan(int argc, char** argv) {
   const auto o = parse(argc, argv,
                        {"--mesh", "--sensor", "--spec", "--settings", "--out", "--scale", "--fit-mm", "--rough-vertices",
-                        "--rho-rel", "--rough-noise-mm", "--seed", "--cover", "--threads", "--segments", "--cell"},
+                        "--rho-rel", "--rough-noise-mm", "--seed", "--cover", "--threads", "--segments", "--cell",
+                        "--calibration"},
                        {"--quiet"});
   for (const char* k : {"--mesh", "--sensor", "--spec", "--out"})
     if (!o.count(k)) throw UsageError(std::string("missing ") + k);
   if (o.count("--scale") && o.count("--fit-mm")) throw UsageError("give --scale or --fit-mm, not both");
 
-  const sp::SensorModel sensor = sp::load_sensor(o.at("--sensor"));
+  sp::SensorModel sensor = sp::load_sensor(o.at("--sensor"));
   const sp::ModelSpec spec = sp::load_spec(o.at("--spec"));
   sp::PlannerSettings settings = o.count("--settings") ? sp::load_planner_settings(o.at("--settings")) : sp::PlannerSettings{};
   if (o.count("--cover")) {
@@ -179,6 +183,18 @@ int cmd_plan(int argc, char** argv) {
 
   std::optional<sp::CellModel> cell;
   if (o.count("--cell")) cell = sp::load_cell(o.at("--cell"));
+  if (o.count("--calibration")) {
+    // Comma-separated result files of calibration runs (docs/calibration.md), applied in order.
+    std::stringstream list(o.at("--calibration"));
+    for (std::string f; std::getline(list, f, ',');) {
+      const auto rec = scancell::calibration::load_calibration(f);
+      sp::CellModel scratch;
+      scratch.name = rec.cell;
+      if (!cell && rec.kind != "sensor") throw UsageError(f + ": a " + rec.kind + " calibration needs --cell");
+      for (const auto& change : scancell::calibration::apply_calibration(rec, sensor, cell ? *cell : scratch))
+        if (!o.count("--quiet")) std::cerr << "scancell: calibration " << f << ": " << change << "\n";
+    }
+  }
   sp::ViewPlan plan = sp::plan_views(std::move(mesh), sensor, spec, settings, rough, threads, cell ? &*cell : nullptr);
   plan.object = source;
   if (plan.rough_report.faces_rejected_by_decimator)

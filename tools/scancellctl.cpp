@@ -2,8 +2,9 @@
 //   scancellctl [--socket PATH] [--json] submit --mesh FILE [--fit-mm L] [--spec FILE] [--settings FILE]
 //                                          [--truth FILE] [--rough-vertices N] [--watch]
 //   scancellctl status [JOB] | list | watch JOB | pause JOB | resume JOB | abort JOB | reload
+//   scancellctl calibrate sensor|turntable_axis|positioner [--watch]
 // Exit codes: 0 success (watch: the job is done), 1 the daemon refused the request, 2 usage, 3 cannot reach
-// the daemon; watch: 10 stalled, 11 aborted, 12 faulted, 13 paused.
+// the daemon; watch: 10 stalled, 11 aborted, 12 faulted, 13 paused, 14 failed (a calibration on bad data).
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -73,6 +74,7 @@ int outcome_code(const std::string& state) {
   if (state == "aborted") return 11;
   if (state == "faulted") return 12;
   if (state == "paused") return 13;
+  if (state == "failed") return 14;
   return 1;
 }
 
@@ -85,6 +87,16 @@ void print_result(const json& reply, double seconds) {
   const json r = reply.value("result", json::object());
   std::printf("\njob %lld: %s\n", static_cast<long long>(reply.value("job", 0)), reply.value("state", "?").c_str());
   if (!reply.value("cause", std::string()).empty()) std::printf("  %s\n", reply["cause"].get<std::string>().c_str());
+  if (r.contains("kind")) {  // a calibration run
+    if (r.contains("file")) std::printf("  %-34s %s\n", "result file", r["file"].get<std::string>().c_str());
+    if (r.contains("values"))
+      for (const auto& [name, v] : r["values"].items())
+        std::printf("  %-34s %s ± %s (95 %%)\n", name.c_str(), v["value"].dump().c_str(), v["ci95"].dump().c_str());
+    if (r.contains("changes"))
+      for (const auto& c : r["changes"]) std::printf("  changed: %s\n", c.get<std::string>().c_str());
+    if (r.contains("error")) std::printf("  %-34s %s\n", "error", r["error"].get<std::string>().c_str());
+    return;
+  }
   auto num = [&](const char* k) { return r.contains(k) ? r[k].get<double>() : std::nan(""); };
   std::printf("  %-34s %d\n", "views executed", r.value("views", 0));
   std::printf("  %-34s %d\n", "plan rounds", r.value("rounds", 0));
@@ -179,6 +191,10 @@ int main(int argc, char** argv) {
     ctl[k]->add_option("job", job, "job id")->required();
   }
   app.add_subcommand("reload", "re-read the calibration (sensor and cell models)");
+  std::string kind;
+  auto* calibrate = app.add_subcommand("calibrate", "run a calibration on the cell (its target must be on the table)");
+  calibrate->add_option("kind", kind, "sensor | turntable_axis | positioner")->required()->check(CLI::IsMember({"sensor", "turntable_axis", "positioner"}));
+  calibrate->add_flag("--watch", then_watch, "then watch the run to its end");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -197,6 +213,8 @@ int main(int argc, char** argv) {
       if (!settings.empty()) req["settings"] = absolute(settings);
       if (!truth.empty()) req["truth"] = absolute(truth);
       if (rough_vertices > 0) req["rough_vertices"] = rough_vertices;
+    } else if (cmd == "calibrate") {
+      req["kind"] = kind;
     } else if (cmd == "status") {
       if (job > 0) req["job"] = job;
     } else if (cmd != "list" && cmd != "reload") {
@@ -208,9 +226,9 @@ int main(int argc, char** argv) {
       std::cerr << "scancellctl: " << reply.value("error", "refused") << "\n";
       return 1;
     }
-    if (as_json || cmd != "submit") std::cout << reply.dump(as_json ? -1 : 2) << std::endl;
+    if (as_json || (cmd != "submit" && cmd != "calibrate")) std::cout << reply.dump(as_json ? -1 : 2) << std::endl;
     else std::cout << "job " << reply["job"] << " queued" << std::endl;
-    if (cmd == "submit" && then_watch) return watch(c, reply["job"].get<std::int64_t>(), as_json);
+    if ((cmd == "submit" || cmd == "calibrate") && then_watch) return watch(c, reply["job"].get<std::int64_t>(), as_json);
     return 0;
   } catch (const std::runtime_error& e) {
     std::cerr << "scancellctl: " << e.what() << "\n";

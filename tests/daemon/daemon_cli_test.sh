@@ -31,7 +31,7 @@ data_dir: $W/data
 lcm_url: "udpm://239.255.76.67:$LCM_PORT?ttl=0"
 control: {socket: $W/control.sock}
 scanner: {driver: sim}
-jobs: {max_rounds: 2, move_timeout_s: 20, scan_speed_mm_s: 100, home_timeout_s: 20$1}
+jobs: {max_rounds: 2, move_timeout_s: 20, scan_speed_mm_s: 400, home_timeout_s: 20$1}
 YAML
 }
 ctl() { "$BUILD/tools/scancellctl" --socket "$W/control.sock" "$@"; }
@@ -86,12 +86,34 @@ ctl watch 1 > "$W/watch2.log"; rc=$?
 [ $rc = 11 ] || fail "watch after abort: exit $rc, want 11 (aborted)"
 out=$(ctl abort 1 2>&1); [ $? = 1 ] && echo "$out" | grep -q "already aborted" || fail "second abort: $out"
 
-# 5. SIGHUP reloads; SIGTERM stops at a safe point and exits 0.
+# 5. A calibration run as a daemon job: the turntable axis from a sphere (the simulated cell's is nominal).
+out=$(ctl calibrate lens 2>&1); [ $? = 2 ] || fail "unknown calibration kind accepted: $out"
+ctl calibrate turntable_axis --watch > "$W/calibrate.log"; rc=$?
+[ $rc = 0 ] || { cat "$W/calibrate.log"; fail "calibrate turntable_axis: exit $rc"; }
+grep -q "table_axis_direction" "$W/calibrate.log" || fail "calibration values not shown"
+calfile=$(ls "$W"/data/calibration/turntable_axis-*.yaml) || fail "no calibration file written"
+grep -q "^scancell_calibration: 1" "$calfile" || fail "calibration file not versioned"
+ctl status | grep -q "turntable_axis-" || fail "status does not list the calibration in force"
+# The planner reads the same file offline.
+out=$("$BUILD/tools/scancell" plan --mesh "$SRC/tests/data/cube50.off" --sensor "$SRC/config/sensors/line-scan-thesis.yaml" \
+  --spec "$SRC/config/spec/thesis.yaml" --cell "$SRC/config/cells/turntable-lift-tilt.yaml" --calibration "$calfile" \
+  --out "$W/plan.json" 2>&1) || fail "scancell plan --calibration: $out"
+out=$("$BUILD/tools/scancell" plan --mesh "$SRC/tests/data/cube50.off" --sensor "$SRC/config/sensors/line-scan-thesis.yaml" \
+  --spec "$SRC/config/spec/thesis.yaml" --calibration "$calfile" --out "$W/plan.json" 2>&1); rc=$?
+[ $rc = 2 ] && echo "$out" | grep -q "needs --cell" || fail "axis calibration without a cell: exit $rc: $out"
+
+# 6. SIGHUP reloads; SIGTERM stops at a safe point and exits 0.
 kill -HUP "$DAEMON_PID"; sleep 0.3
 grep -q "SIGHUP reload" "$W/daemon.log" || fail "SIGHUP not handled"
 kill -TERM "$DAEMON_PID"; wait "$DAEMON_PID"; rc=$?; DAEMON_PID=""
 [ $rc = 0 ] || fail "SIGTERM exit $rc"
 grep -q "scancelld: stopped" "$W/daemon.log" || fail "no clean stop"
+# 7. A restarted daemon loads the calibration its run wrote.
+"$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" > "$W/daemon2.log" 2>&1 &
+DAEMON_PID=$!
+for _ in $(seq 400); do [ -S "$W/control.sock" ] && break; sleep 0.025; done
+ctl status | grep -q "turntable_axis-" || fail "restarted daemon did not load $calfile"
+kill -TERM "$DAEMON_PID"; wait "$DAEMON_PID"; DAEMON_PID=""
 kill -TERM "$LOGGER_PID"; wait "$LOGGER_PID" 2>/dev/null; LOGGER_PID=""
 for ch in SCANCELL_STATUS SCANCELL_PROGRESS SCANCELL_AXIS_STATE SCANCELL_PLAN; do
   grep -aq "$ch" "$W/lcm.log" || fail "lcm-logger recorded no $ch"
