@@ -9,7 +9,7 @@ PKGS=(
   libgtest-dev libgmock-dev libbenchmark-dev libpng-dev
   coinor-libcbc-dev liborocos-kdl-dev libfcl-dev
   libmodbus-dev mbpoll libgpiod-dev libsqlite3-dev zlib1g-dev
-  liblcm-dev liblcm-bin iproute2 libsystemd-dev libcli11-dev
+  liblcm-dev liblcm-bin iproute2 libsystemd-dev libcli11-dev libnanoflann-dev
 )
 missing=()
 for p in "${PKGS[@]}"; do

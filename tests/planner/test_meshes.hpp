@@ -72,4 +72,26 @@ inline void add_box(TriangleMesh& m, const Eigen::Vector3d& lo, const Eigen::Vec
   add_grid(m, {lo.x(), hi.y(), lo.z()}, Z, X, n(2), n(0), step);            // +y
 }
 
+/// A closed UV sphere, outward triangles.
+inline TriangleMesh uv_sphere(const Eigen::Vector3d& c, double r, int rings = 90, int segments = 180) {
+  TriangleMesh m;
+  m.vertices.push_back(c + Eigen::Vector3d(0, 0, r));
+  for (int i = 1; i < rings; ++i)
+    for (int j = 0; j < segments; ++j) {
+      const double th = M_PI * i / rings, ph = 2 * M_PI * j / segments;
+      m.vertices.push_back(c + r * Eigen::Vector3d(std::sin(th) * std::cos(ph), std::sin(th) * std::sin(ph), std::cos(th)));
+    }
+  m.vertices.push_back(c - Eigen::Vector3d(0, 0, r));
+  const auto south = static_cast<std::uint32_t>(m.vertices.size() - 1);
+  auto at = [&](int i, int j) { return static_cast<std::uint32_t>(1 + (i - 1) * segments + (j % segments)); };
+  for (int j = 0; j < segments; ++j) m.triangles.push_back({0, at(1, j), at(1, j + 1)});
+  for (int i = 1; i < rings - 1; ++i)
+    for (int j = 0; j < segments; ++j) {
+      m.triangles.push_back({at(i, j), at(i + 1, j), at(i + 1, j + 1)});
+      m.triangles.push_back({at(i, j), at(i + 1, j + 1), at(i, j + 1)});
+    }
+  for (int j = 0; j < segments; ++j) m.triangles.push_back({at(rings - 1, j), south, at(rings - 1, j + 1)});
+  return m;
+}
+
 }  // namespace scancell::planner::testing

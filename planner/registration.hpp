@@ -1,0 +1,63 @@
+#pragma once
+// Registration of an executed view (thesis 1.1.4, 4.2): point-to-plane ICP of the view's samples against the
+// current model (a point cloud with normals: the rough model's surface, plus views already registered). With
+// an imperfect positioner the acquired image must be registered before its coverage can be trusted; a view
+// whose geometry cannot fix all six degrees of freedom (a plane, a cylinder: thesis 8.2) is flagged as
+// ill-conditioned instead of drifting along its free directions.
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include "planner/mesh.hpp"
+
+namespace scancell::planner {
+
+/// Target of the registration: points with unit normals, mm, object frame, and a grid for nearest neighbours.
+class ModelCloud {
+ public:
+  ModelCloud() = default;
+  /// Samples `mesh` at about `spacing_mm` (vertices plus points on each triangle) with face normals.
+  static ModelCloud from_mesh(const TriangleMesh& mesh, double spacing_mm);
+  void add(const std::vector<Eigen::Vector3d>& points, const std::vector<Eigen::Vector3d>& normals);
+  std::size_t size() const { return points_.size(); }
+  /// The nearest point within `max_mm`, or -1.
+  long nearest(const Eigen::Vector3d& p, double max_mm) const;
+  const Eigen::Vector3d& point(std::size_t i) const { return points_[i]; }
+  const Eigen::Vector3d& normal(std::size_t i) const { return normals_[i]; }
+
+ private:
+  void index();
+  struct Tree;  // nanoflann k-d tree over points_
+  std::vector<Eigen::Vector3d> points_, normals_;
+  std::shared_ptr<Tree> tree_;
+};
+
+struct IcpOptions {
+  double max_distance_mm = 5.0;     // pairs farther apart are not correspondences (the pose error bound)
+  double max_normal_angle_rad = 0.5;
+  int max_iterations = 50;
+  double converged_mm = 1e-5;       // stop when the update moves no sample more than this
+  double min_overlap = 0.3;         // share of the samples that must find a partner
+  double min_conditioning = 1e-2;   // smallest / largest eigenvalue of the scaled normal matrix
+  double lever_mm = 100.0;          // rotations are scaled by this to compare them with translations
+};
+
+struct IcpResult {
+  bool ok = false;
+  std::string why;                  // when not ok: too little overlap, ill-conditioned, did not converge
+  Eigen::Isometry3d correction = Eigen::Isometry3d::Identity();  // apply to the view's samples (object frame)
+  double rms_mm = 0.0;              // point-to-plane residual after registration
+  double overlap = 0.0;
+  double conditioning = 0.0;
+  int iterations = 0;
+  Eigen::Matrix<double, 6, 1> weakest = Eigen::Matrix<double, 6, 1>::Zero();  // the least constrained motion
+};
+
+/// Registers `points` (object frame as the positioner believed) to `model`.
+IcpResult register_points(const std::vector<Eigen::Vector3d>& points, const ModelCloud& model, const IcpOptions& options = {});
+
+}  // namespace scancell::planner

@@ -1,0 +1,106 @@
+// The rough model from a rough scan: range images of a sphere and of a box fused into a TSDF volume and
+// contoured with surface nets come back closed and within one voxel of the truth; what no ray saw is closed
+// conservatively and marked hypothetical.
+#include <map>
+
+#include <gtest/gtest.h>
+
+#include "planner/config.hpp"
+#include "planner/fusion.hpp"
+#include "test_meshes.hpp"
+
+namespace scancell::planner {
+namespace {
+
+/// Views from 14 directions (faces and corners of a cube) at `standoff_mm` from `centre`.
+std::vector<RangeImage> scans_around(const TriangleMesh& m, const Eigen::Vector3d& centre, double standoff_mm,
+                                     bool skip_below = false) {
+  const SensorModel s = load_sensor(testing::source_path("config/sensors/line-scan-thesis.yaml"));
+  const OcclusionScene scene(m);
+  std::vector<RangeImage> out;
+  std::vector<Eigen::Vector3d> dirs = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  for (int x : {-1, 1})
+    for (int y : {-1, 1})
+      for (int z : {-1, 1}) dirs.emplace_back(x, y, z);
+  for (auto d : dirs) {
+    d.normalize();
+    if (skip_below && d.z() < -0.1) continue;
+    const Eigen::Vector3d y = std::abs(d.z()) > 0.99 ? Eigen::Vector3d::UnitY() : Eigen::Vector3d::UnitZ().cross(d).normalized();
+    ScanPose pose;
+    pose.camera_to_object.linear() << y.cross(d), y, d;
+    pose.camera_to_object.translation() = centre + standoff_mm * d;
+    pose.scan_length_mm = 110.0;
+    out.push_back(virtual_scan(scene, s, pose));
+  }
+  return out;
+}
+
+/// Edges not shared by exactly two triangles (0: closed).
+std::size_t open_edges(const TriangleMesh& m) {
+  std::map<std::pair<std::uint32_t, std::uint32_t>, int> uses;
+  for (const auto& t : m.triangles)
+    for (int k = 0; k < 3; ++k) ++uses[{std::min(t[k], t[(k + 1) % 3]), std::max(t[k], t[(k + 1) % 3])}];
+  std::size_t bad = 0;
+  for (const auto& [e, n] : uses) bad += n != 2;
+  return uses.empty() ? 1 : bad;
+}
+
+double volume(const TriangleMesh& m) {
+  double v = 0.0;
+  for (const auto& t : m.triangles) v += m.vertices[t[0]].dot(m.vertices[t[1]].cross(m.vertices[t[2]])) / 6.0;
+  return v;
+}
+
+TEST(Fusion, SphereComesBackClosedWithinOneVoxel) {
+  const Eigen::Vector3d c(0, 0, 0);
+  const double r = 40.0;
+  const TriangleMesh truth = testing::uv_sphere(c, r);
+  TsdfVolume vol(Eigen::AlignedBox3d(Eigen::Vector3d::Constant(-50), Eigen::Vector3d::Constant(50)));
+  for (const auto& img : scans_around(truth, c, 230.0)) vol.integrate(img);
+  const FusedModel f = vol.extract();
+  ASSERT_GT(f.mesh.vertices.size(), 1000u);
+  EXPECT_EQ(open_edges(f.mesh), 0u);
+  std::size_t measured = 0;
+  double worst = 0.0;
+  for (std::size_t v = 0; v < f.mesh.vertices.size(); ++v) {
+    if (f.hypothetical[v]) continue;
+    ++measured;
+    worst = std::max(worst, std::abs((f.mesh.vertices[v] - c).norm() - r));
+  }
+  EXPECT_LE(worst, vol.voxel_mm());
+  EXPECT_GT(measured, 0.95 * static_cast<double>(f.mesh.vertices.size()));
+  EXPECT_NEAR(volume(f.mesh), 4.0 / 3.0 * M_PI * r * r * r, 0.03 * 4.0 / 3.0 * M_PI * r * r * r);
+}
+
+TEST(Fusion, BoxOnATableIsClosedUnderneathAndTheGuessIsMarked) {
+  // The cube seen from above and around only (the table hides its underside): the top and sides come back
+  // within a voxel, the unseen bottom is closed and every vertex there is hypothetical.
+  TriangleMesh truth = load_mesh(testing::source_path("tests/data/cube50.off"));
+  const Eigen::Vector3d c(25, 25, 25);
+  FusionOptions o;
+  o.floor_z_mm = 0.0;  // the table top
+  TsdfVolume vol(Eigen::AlignedBox3d(Eigen::Vector3d::Constant(-8), Eigen::Vector3d::Constant(58)), o);
+  for (const auto& img : scans_around(truth, c, 220.0, true)) vol.integrate(img);
+  const FusedModel f = vol.extract();
+  EXPECT_EQ(open_edges(f.mesh), 0u);
+  auto to_box = [](const Eigen::Vector3d& p) {
+    const Eigen::Vector3d lo = p, hi = Eigen::Vector3d::Constant(50) - p;
+    return std::min({std::abs(lo.x()), std::abs(lo.y()), std::abs(lo.z()), std::abs(hi.x()), std::abs(hi.y()), std::abs(hi.z())});
+  };
+  double worst = 0.0;
+  std::size_t bottom = 0, bottom_guess = 0;
+  for (std::size_t v = 0; v < f.mesh.vertices.size(); ++v) {
+    const Eigen::Vector3d& p = f.mesh.vertices[v];
+    if (p.z() < 1.0 && p.x() > 5 && p.x() < 45 && p.y() > 5 && p.y() < 45) {
+      ++bottom;
+      bottom_guess += f.hypothetical[v];
+    }
+    if (!f.hypothetical[v]) worst = std::max(worst, to_box(p));
+  }
+  EXPECT_LE(worst, vol.voxel_mm());
+  EXPECT_GT(bottom, 100u);
+  EXPECT_EQ(bottom_guess, bottom);
+}
+
+}  // namespace
+}  // namespace scancell::planner
