@@ -140,6 +140,7 @@ struct JobRunner::Job {
   sp::TriangleMesh object;          // rough model input, mm, object frame
   std::optional<sp::RoughModel> rough;
   std::unique_ptr<sp::MeasuredCoverage> coverage;
+  std::unique_ptr<sp::ModelCloud> cloud;  // what views register to: the rough model, then the registered views
   std::unique_ptr<ScanHead> head;
   sp::CellModel cell;               // with the object's placement on the table
   std::vector<std::uint32_t> unmeasurable;  // rows no candidate of the first plan measures
@@ -178,7 +179,7 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
   for (auto plan : journal_.plans(j.id))
     for (const auto& s : journal_.scans(plan)) {
       ++views;
-      if (state != JobState::aborted) images.push_back(sp::range_image_from_ply(journal_.read_scan(s), s.file));
+      if (state != JobState::aborted && s.note.empty()) images.push_back(sp::range_image_from_ply(journal_.read_scan(s), s.file));
     }
   result["views"] = views;
   if (j.rough && j.coverage) {
@@ -211,6 +212,17 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
       f << p.x() << ' ' << p.y() << ' ' << p.z() << ' ' << n.x() << ' ' << n.y() << ' ' << n.z() << ' ' << j.rough->area_mm2[r] << "\n";
     }
     result["unmeasured_file"] = path.string();
+  }
+  // Simulation: the same coverage of the rough model from where the samples really are (the simulator's
+  // ground-truth hit points): how far registration (or its absence) lets the measured figure be trusted.
+  if (state != JobState::aborted && !images.empty() && j.rough) {
+    sp::MeasuredCoverage truth(*j.rough, j.spec, settings_.coverage);
+    for (auto img : images) {
+      for (auto& smp : img.samples)
+        if (smp.valid()) smp.object_mm = smp.true_object_mm;
+      truth.add(img);
+    }
+    result["verified_coverage"] = truth.coverage();
   }
   // Simulation: verified measurability of the stored scans against the object actually on the table.
   if (state != JobState::aborted && !images.empty()) {
@@ -294,8 +306,16 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
                           " rows, the journalled plan " + std::to_string(info0.at("rows").get<std::size_t>()) +
                           " (mesh file or planner changed since the job was planned)");
     j.coverage = std::make_unique<sp::MeasuredCoverage>(*j.rough, j.spec, settings_.coverage);
+    if (settings_.register_views) j.cloud = std::make_unique<sp::ModelCloud>(sp::ModelCloud::from_mesh(j.rough->mesh(), 1.0));
+    std::vector<Eigen::Vector3d> cloud_points, cloud_normals;
     for (auto plan : plans)
-      for (const auto& s : journal_.scans(plan)) j.coverage->add(sp::range_image_from_ply(journal_.read_scan(s), s.file));
+      for (const auto& s : journal_.scans(plan)) {
+        if (!s.note.empty()) continue;  // stored, but not counted (its registration failed)
+        const sp::RangeImage img = sp::range_image_from_ply(journal_.read_scan(s), s.file);
+        j.coverage->add(img);
+        if (j.cloud) sp::image_points_normals(img, 3, cloud_points, cloud_normals);
+      }
+    if (j.cloud && !cloud_points.empty()) j.cloud->add(cloud_points, cloud_normals);
     j.progress.measured = j.coverage->coverage();
 
     // What is on the table, for a simulated head: the object (ground truth) and the plate.
@@ -450,12 +470,37 @@ void JobRunner::execute_view(Job& j, std::int64_t plan, const ViewRecord& v, con
     j.progress.event = "view " + std::to_string(v.index + 1) + "/" + std::to_string(j.progress.views) + ": " + what;
     report_(j.progress);
   });
-  const sp::RangeImage& img = got.image;
+  sp::RangeImage img = got.image;
   const int lost = got.lost_profiles;
 
-  // Store (durable before it counts), then update the measured coverage.
-  journal_.store_scan(plan, v.index, sp::range_image_to_ply(img));
-  j.coverage->add(img);
+  // Register the view to the model before its coverage counts (thesis 1.1.4: the positioner's pose is not
+  // good enough to trust the samples where it put them).
+  std::string note, registration;
+  if (j.cloud) {
+    std::vector<Eigen::Vector3d> pts;
+    for (const auto& s : img.samples)
+      if (s.valid()) pts.push_back(s.object_mm.cast<double>());
+    const sp::IcpResult r = sp::register_points(pts, *j.cloud, settings_.icp);
+    if (r.ok) {
+      sp::apply_correction(img, r.correction);
+      registration = ", registered (moved " + fmt(r.correction.translation().norm(), 3) + " mm, " +
+                     fmt(Eigen::AngleAxisd(r.correction.linear()).angle() * 180.0 / M_PI, 3) + "°, residual " + fmt(r.rms_mm, 3) + " mm" +
+                     (r.free_directions ? ", " + std::to_string(r.free_directions) + " directions left as positioned" : "") + ")";
+    } else {
+      note = "registration failed: " + r.why;
+      registration = ", " + note + "; not counted";
+    }
+  }
+  // Store (durable before it counts), then update the measured coverage and the model views register to.
+  journal_.store_scan(plan, v.index, sp::range_image_to_ply(img), note);
+  if (note.empty()) {
+    j.coverage->add(img);
+    if (j.cloud) {
+      std::vector<Eigen::Vector3d> p, n;
+      sp::image_points_normals(img, 3, p, n);
+      j.cloud->add(p, n);
+    }
+  }
   j.progress.measured = j.coverage->coverage();
   const double secs = std::chrono::duration<double>(Clock::now() - t0).count();
   j.view_seconds = (j.view_seconds * j.views_timed + secs) / (j.views_timed + 1);
@@ -463,7 +508,7 @@ void JobRunner::execute_view(Job& j, std::int64_t plan, const ViewRecord& v, con
   j.progress.eta_s = j.view_seconds * static_cast<double>(j.planned_view_s.size() - static_cast<std::size_t>(v.index) - 1);
   j.progress.event = "view " + std::to_string(v.index + 1) + "/" + std::to_string(j.progress.views) + " stored: " +
                      std::to_string(img.valid_count()) + " samples" + (lost ? ", " + std::to_string(lost) + " profiles missed" : "") +
-                     ", measured " + fmt(j.progress.measured) + " (" + fmt(secs, 2) + " s)";
+                     registration + ", measured " + fmt(j.progress.measured) + " (" + fmt(secs, 2) + " s)";
   journal_.event(j.id, j.progress.event);
   report_(j.progress);
 }

@@ -26,6 +26,7 @@
 #include "planner/config.hpp"
 #include "planner/measured_coverage.hpp"
 #include "planner/plan.hpp"
+#include "planner/registration.hpp"
 
 namespace scancell::daemon {
 
@@ -72,6 +73,12 @@ struct JobSettings {
   double scan_speed_mm_s = 0.0;                    // sweep speed; 0: the cell's scan_speed_mm_s
   std::chrono::microseconds trigger_width{0};      // scanner trigger pulse width
   int planner_threads = 0;
+  bool register_views = true;                      // ICP each executed view against the model before counting it
+  planner::IcpOptions icp = [] {
+    planner::IcpOptions o;
+    o.partial = true;  // a face-on view registers in what its shape fixes; the rest stays as positioned
+    return o;
+  }();
   std::filesystem::path jobs_dir;                  // per-job outputs (coverage picture, unmeasured rows)
 };
 

@@ -133,6 +133,7 @@ Journal::Journal(const std::filesystem::path& dir) : dir_(dir) {
                                             PRIMARY KEY(plan, idx)))");
   exec(R"(CREATE TABLE IF NOT EXISTS scans (plan INTEGER NOT NULL, view INTEGER NOT NULL, file TEXT NOT NULL,
                                             bytes INTEGER NOT NULL, crc32 INTEGER NOT NULL,
+                                            note TEXT NOT NULL DEFAULT '',
                                             PRIMARY KEY(plan, view), FOREIGN KEY(plan, view) REFERENCES views(plan, idx)))");
   exec(R"(CREATE TABLE IF NOT EXISTS events (id INTEGER PRIMARY KEY, job INTEGER NOT NULL, text TEXT NOT NULL,
                                              time REAL NOT NULL DEFAULT (julianday('now'))))");
@@ -253,7 +254,7 @@ std::optional<ViewRecord> Journal::first_unfinished_view(std::int64_t plan) {
   return ViewRecord{s.i64(0), static_cast<int>(s.i64(1)), s.text(2), false};
 }
 
-ScanRecord Journal::store_scan(std::int64_t plan, int view, const std::string& data) {
+ScanRecord Journal::store_scan(std::int64_t plan, int view, const std::string& data, const std::string& note) {
   std::lock_guard<std::recursive_mutex> lock(mu_);
   {
     Stmt s(db_, "SELECT stored FROM views WHERE plan = ? AND idx = ?");
@@ -261,7 +262,7 @@ ScanRecord Journal::store_scan(std::int64_t plan, int view, const std::string& d
     if (!s.step()) throw JournalError("journal: plan " + std::to_string(plan) + " has no view " + std::to_string(view));
     if (s.i64(0) != 0) throw JournalError("journal: plan " + std::to_string(plan) + " view " + std::to_string(view) + " already has its scan");
   }
-  ScanRecord rec{plan, view, "scans/p" + std::to_string(plan) + "-v" + std::to_string(view) + ".bin", data.size(), crc_of(data)};
+  ScanRecord rec{plan, view, "scans/p" + std::to_string(plan) + "-v" + std::to_string(view) + ".bin", data.size(), crc_of(data), note};
   const std::filesystem::path final_path = dir_ / rec.file, tmp = final_path.string() + ".tmp";
   {
     std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
@@ -274,9 +275,9 @@ ScanRecord Journal::store_scan(std::int64_t plan, int view, const std::string& d
   fsync_path(dir_ / "scans", true);
   // Only now, with the file durable under its final name, does the journal reference it.
   Transaction t(db_);
-  Stmt(db_, "INSERT INTO scans(plan, view, file, bytes, crc32) VALUES (?, ?, ?, ?, ?)")
+  Stmt(db_, "INSERT INTO scans(plan, view, file, bytes, crc32, note) VALUES (?, ?, ?, ?, ?, ?)")
       .bind(1, plan).bind(2, static_cast<std::int64_t>(view)).bind(3, rec.file)
-      .bind(4, static_cast<std::int64_t>(rec.bytes)).bind(5, static_cast<std::int64_t>(rec.crc32)).step();
+      .bind(4, static_cast<std::int64_t>(rec.bytes)).bind(5, static_cast<std::int64_t>(rec.crc32)).bind(6, note).step();
   Stmt(db_, "UPDATE views SET stored = 1 WHERE plan = ? AND idx = ?").bind(1, plan).bind(2, static_cast<std::int64_t>(view)).step();
   t.commit();
   return rec;
@@ -285,10 +286,11 @@ ScanRecord Journal::store_scan(std::int64_t plan, int view, const std::string& d
 std::vector<ScanRecord> Journal::scans(std::int64_t plan) {
   std::lock_guard<std::recursive_mutex> lock(mu_);
   std::vector<ScanRecord> out;
-  Stmt s(db_, "SELECT plan, view, file, bytes, crc32 FROM scans WHERE plan = ? ORDER BY view");
+  Stmt s(db_, "SELECT plan, view, file, bytes, crc32, note FROM scans WHERE plan = ? ORDER BY view");
   s.bind(1, plan);
   while (s.step())
-    out.push_back({s.i64(0), static_cast<int>(s.i64(1)), s.text(2), static_cast<std::uint64_t>(s.i64(3)), static_cast<std::uint32_t>(s.i64(4))});
+    out.push_back({s.i64(0), static_cast<int>(s.i64(1)), s.text(2), static_cast<std::uint64_t>(s.i64(3)),
+                   static_cast<std::uint32_t>(s.i64(4)), s.text(5)});
   return out;
 }
 
@@ -321,7 +323,7 @@ std::vector<std::string> Journal::check() {
   std::vector<std::string> problems;
   Stmt s(db_, "SELECT plan, view, file, bytes, crc32 FROM scans");
   while (s.step()) {
-    const ScanRecord r{s.i64(0), static_cast<int>(s.i64(1)), s.text(2), static_cast<std::uint64_t>(s.i64(3)), static_cast<std::uint32_t>(s.i64(4))};
+    const ScanRecord r{s.i64(0), static_cast<int>(s.i64(1)), s.text(2), static_cast<std::uint64_t>(s.i64(3)), static_cast<std::uint32_t>(s.i64(4)), ""};
     try {
       read_scan(r);
     } catch (const JournalError& e) {

@@ -41,6 +41,7 @@ struct ScanRecord {
   std::string file;  // relative to the data directory
   std::uint64_t bytes = 0;
   std::uint32_t crc32 = 0;
+  std::string note;  // why the scan does not count (e.g. its registration failed); empty when it counts
 };
 
 /// Journal errors name the database file and the statement.
@@ -79,7 +80,7 @@ class Journal {
 
   /// Makes the scan durable (temp, fsync, rename, directory fsync), then records it and marks the view
   /// stored in one transaction. Refuses a view that already has a scan.
-  ScanRecord store_scan(std::int64_t plan, int view, const std::string& data);
+  ScanRecord store_scan(std::int64_t plan, int view, const std::string& data, const std::string& note = "");
   std::vector<ScanRecord> scans(std::int64_t plan);
   std::string read_scan(const ScanRecord& s);  // verifies size and CRC-32; JournalError if they do not match
 

@@ -18,16 +18,22 @@ struct CloudAdaptor {
 };
 }  // namespace
 
-struct ModelCloud::Tree {
-  CloudAdaptor adaptor;
+struct ModelCloud::Data {
+  std::vector<Eigen::Vector3d> points, normals;
+  CloudAdaptor adaptor{&points};
   nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, CloudAdaptor>, CloudAdaptor, 3> index;
-  explicit Tree(const std::vector<Eigen::Vector3d>* p) : adaptor{p}, index(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16)) {
+  Data(std::vector<Eigen::Vector3d> p, std::vector<Eigen::Vector3d> n)
+      : points(std::move(p)), normals(std::move(n)), index(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16)) {
     index.buildIndex();
   }
 };
 
+std::size_t ModelCloud::size() const { return data_ ? data_->points.size() : 0; }
+const Eigen::Vector3d& ModelCloud::point(std::size_t i) const { return data_->points[i]; }
+const Eigen::Vector3d& ModelCloud::normal(std::size_t i) const { return data_->normals[i]; }
+
 ModelCloud ModelCloud::from_mesh(const TriangleMesh& mesh, double spacing) {
-  ModelCloud c;
+  std::vector<Eigen::Vector3d> points, normals;
   for (const auto& t : mesh.triangles) {
     const Eigen::Vector3d a = mesh.vertices[t[0]], b = mesh.vertices[t[1]], d = mesh.vertices[t[2]];
     const Eigen::Vector3d n = (b - a).cross(d - a);
@@ -36,29 +42,57 @@ ModelCloud ModelCloud::from_mesh(const TriangleMesh& mesh, double spacing) {
     const int k = std::max(1, static_cast<int>(std::ceil(longest / spacing)));
     for (int i = 0; i <= k; ++i)
       for (int j = 0; i + j <= k; ++j) {
-        c.points_.push_back(a + (b - a) * (static_cast<double>(i) / k) + (d - a) * (static_cast<double>(j) / k));
-        c.normals_.push_back(n.normalized());
+        points.push_back(a + (b - a) * (static_cast<double>(i) / k) + (d - a) * (static_cast<double>(j) / k));
+        normals.push_back(n.normalized());
       }
   }
-  c.index();
+  ModelCloud c;
+  c.data_ = std::make_shared<const Data>(std::move(points), std::move(normals));
   return c;
 }
 
 void ModelCloud::add(const std::vector<Eigen::Vector3d>& points, const std::vector<Eigen::Vector3d>& normals) {
-  points_.insert(points_.end(), points.begin(), points.end());
-  normals_.insert(normals_.end(), normals.begin(), normals.end());
-  index();
+  std::vector<Eigen::Vector3d> p = data_ ? data_->points : std::vector<Eigen::Vector3d>{};
+  std::vector<Eigen::Vector3d> n = data_ ? data_->normals : std::vector<Eigen::Vector3d>{};
+  p.insert(p.end(), points.begin(), points.end());
+  n.insert(n.end(), normals.begin(), normals.end());
+  data_ = std::make_shared<const Data>(std::move(p), std::move(n));
 }
 
-void ModelCloud::index() { tree_ = std::make_shared<Tree>(&points_); }
-
 long ModelCloud::nearest(const Eigen::Vector3d& p, double max_mm) const {
-  if (!tree_ || points_.empty()) return -1;
+  if (!data_ || data_->points.empty()) return -1;
   unsigned idx = 0;
   double d2 = 0.0;
   const double q[3] = {p.x(), p.y(), p.z()};
-  if (tree_->index.knnSearch(q, 1, &idx, &d2) != 1 || d2 > max_mm * max_mm) return -1;
+  if (data_->index.knnSearch(q, 1, &idx, &d2) != 1 || d2 > max_mm * max_mm) return -1;
   return static_cast<long>(idx);
+}
+
+void image_points_normals(const RangeImage& img, int stride, std::vector<Eigen::Vector3d>& pts,
+                          std::vector<Eigen::Vector3d>& nrm) {
+  const Eigen::Matrix3d rot = img.pose.camera_to_object.linear();
+  for (int j = 1; j + 1 < img.rows; j += stride)
+    for (int i = 1; i + 1 < img.columns; i += stride) {
+      const RangeSample& s = img.at(i, j);
+      const RangeSample &l = img.at(i - 1, j), &r = img.at(i + 1, j), &d = img.at(i, j - 1), &u = img.at(i, j + 1);
+      if (!s.valid() || !l.valid() || !r.valid() || !d.valid() || !u.valid()) continue;
+      const Eigen::Vector3d a = (r.object_mm - l.object_mm).cast<double>(), b = (u.object_mm - d.object_mm).cast<double>();
+      Eigen::Vector3d n = a.cross(b);
+      // Neighbours across a depth step are not a surface.
+      if (!(n.norm() > 0.0) || a.norm() > 5.0 || b.norm() > 5.0) continue;
+      n.normalize();
+      Eigen::Vector3d to_laser = -s.camera_mm.cast<double>();
+      if (img.kind == SensorKind::line_scan) to_laser.y() = 0.0;
+      if (n.dot(rot * to_laser) < 0.0) n = -n;
+      pts.push_back(s.object_mm.cast<double>());
+      nrm.push_back(n);
+    }
+}
+
+void apply_correction(RangeImage& img, const Eigen::Isometry3d& c) {
+  for (auto& s : img.samples)
+    if (s.valid()) s.object_mm = (c * s.object_mm.cast<double>()).cast<float>();
+  img.pose.camera_to_object = c * img.pose.camera_to_object;
 }
 
 IcpResult register_points(const std::vector<Eigen::Vector3d>& pts_in, const ModelCloud& model, const IcpOptions& o) {
@@ -111,12 +145,22 @@ IcpResult register_points(const std::vector<Eigen::Vector3d>& pts_in, const Mode
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> es(ata);
     r.conditioning = es.eigenvalues()(0) / es.eigenvalues()(5);
     r.weakest = es.eigenvectors().col(0);
-    if (r.conditioning < o.min_conditioning) {
+    if (r.conditioning < o.min_conditioning && !o.partial) {
       r.why = "ill-conditioned: the view's shape does not fix its pose (conditioning " + std::to_string(r.conditioning) +
               "; a plane or a surface of revolution slides)";
       return r;
     }
-    const Eigen::Matrix<double, 6, 1> x = ata.ldlt().solve(atb);
+    // Solve in the eigenbasis, leaving out the motions the view's shape does not constrain.
+    Eigen::Matrix<double, 6, 1> x = Eigen::Matrix<double, 6, 1>::Zero();
+    r.free_directions = 0;
+    for (int e = 0; e < 6; ++e) {
+      const double lambda = es.eigenvalues()(e);
+      if (lambda < o.min_conditioning * es.eigenvalues()(5)) {
+        ++r.free_directions;
+        continue;
+      }
+      x += es.eigenvectors().col(e) * (es.eigenvectors().col(e).dot(atb) / lambda);
+    }
     const Eigen::Vector3d w = x.head<3>() / o.lever_mm, v = x.tail<3>();
     Eigen::Isometry3d step = Eigen::Isometry3d::Identity();
     if (w.norm() > 0.0) step.linear() = Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix();
@@ -129,6 +173,7 @@ IcpResult register_points(const std::vector<Eigen::Vector3d>& pts_in, const Mode
     if (moved_most < o.converged_mm) {
       r.ok = true;
       r.correction = t;
+      if (r.free_directions) r.why = "ill-conditioned in " + std::to_string(r.free_directions) + " of 6 directions: registered in the others";
       return r;
     }
   }

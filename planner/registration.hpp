@@ -13,6 +13,7 @@
 #include <Eigen/Geometry>
 
 #include "planner/mesh.hpp"
+#include "planner/virtual_scanner.hpp"
 
 namespace scancell::planner {
 
@@ -23,27 +24,31 @@ class ModelCloud {
   /// Samples `mesh` at about `spacing_mm` (vertices plus points on each triangle) with face normals.
   static ModelCloud from_mesh(const TriangleMesh& mesh, double spacing_mm);
   void add(const std::vector<Eigen::Vector3d>& points, const std::vector<Eigen::Vector3d>& normals);
-  std::size_t size() const { return points_.size(); }
+  std::size_t size() const;
   /// The nearest point within `max_mm`, or -1.
   long nearest(const Eigen::Vector3d& p, double max_mm) const;
-  const Eigen::Vector3d& point(std::size_t i) const { return points_[i]; }
-  const Eigen::Vector3d& normal(std::size_t i) const { return normals_[i]; }
+  const Eigen::Vector3d& point(std::size_t i) const;
+  const Eigen::Vector3d& normal(std::size_t i) const;
 
  private:
-  void index();
-  struct Tree;  // nanoflann k-d tree over points_
-  std::vector<Eigen::Vector3d> points_, normals_;
-  std::shared_ptr<Tree> tree_;
+  // Points, normals and the nanoflann k-d tree over them live together on the heap, so that the tree's
+  // reference to its points survives copies and moves of the cloud.
+  struct Data;
+  std::shared_ptr<const Data> data_;
 };
 
 struct IcpOptions {
   double max_distance_mm = 5.0;     // pairs farther apart are not correspondences (the pose error bound)
   double max_normal_angle_rad = 0.5;
-  int max_iterations = 50;
-  double converged_mm = 1e-5;       // stop when the update moves no sample more than this
+  int max_iterations = 100;
+  double converged_mm = 1e-4;       // stop when the update moves no sample more than this
   double min_overlap = 0.3;         // share of the samples that must find a partner
   double min_conditioning = 1e-2;   // smallest / largest eigenvalue of the scaled normal matrix
   double lever_mm = 100.0;          // rotations are scaled by this to compare them with translations
+  /// false: an ill-conditioned view is refused. true: it is registered in the directions its shape fixes and
+  /// left where the positioner put it in the others (a face-on plane: only its distance and tilt), and the
+  /// result says how many directions were left.
+  bool partial = false;
 };
 
 struct IcpResult {
@@ -54,8 +59,17 @@ struct IcpResult {
   double overlap = 0.0;
   double conditioning = 0.0;
   int iterations = 0;
+  int free_directions = 0;          // partial: motions the view could not fix (left as the positioner had them)
   Eigen::Matrix<double, 6, 1> weakest = Eigen::Matrix<double, 6, 1>::Zero();  // the least constrained motion
 };
+
+/// A range image's samples (every `stride`-th row and column) with normals from their image neighbours,
+/// turned towards the laser: what a registered view adds to the model.
+void image_points_normals(const RangeImage& image, int stride, std::vector<Eigen::Vector3d>& points,
+                          std::vector<Eigen::Vector3d>& normals);
+
+/// Applies a registration correction to an image: samples and pose move together.
+void apply_correction(RangeImage& image, const Eigen::Isometry3d& correction);
 
 /// Registers `points` (object frame as the positioner believed) to `model`.
 IcpResult register_points(const std::vector<Eigen::Vector3d>& points, const ModelCloud& model, const IcpOptions& options = {});
