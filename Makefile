@@ -5,7 +5,7 @@ JOBS       ?= $(shell nproc)
 CMAKE      ?= cmake
 SCANCELL    = $(BUILD)/tools/scancell
 
-.PHONY: all deps build test test-asan demo demo-offline kill-test bench quality clean
+.PHONY: all deps build test test-asan demo demo-rough demo-offline kill-test bench quality clean
 
 all: build
 
@@ -36,6 +36,10 @@ test-asan: deps
 # on the fine model (verified measurability, coverage mesh and projection image).
 demo: build
 	scripts/demo.sh $(BUILD)
+
+# The same from nothing but a bounding box: rough scan, fused rough model, plan, execute, register, replan.
+demo-rough: build
+	scripts/demo.sh $(BUILD) rough
 
 # The planner and verifier alone, offline: a plan file, its verification report and coverage pictures.
 demo-offline: build

@@ -91,14 +91,7 @@ Eigen::Vector3d oriented(Eigen::Vector3d n, const Eigen::Vector3d& towards) { re
 
 sp::JointVector look_at(const sp::CellModel& cell, const Eigen::Vector3d& p, double standoff, double tilt, double table,
                         double scan_length, const std::string& what) {
-  const Eigen::Isometry3d object_to_world = sp::table_to_world(cell, table) * cell.object_on_table;
-  const Eigen::Vector3d z(std::cos(tilt), 0.0, std::sin(tilt)), y = Eigen::Vector3d::UnitY();
-  Eigen::Isometry3d camera_to_world = Eigen::Isometry3d::Identity();
-  camera_to_world.linear().col(0) = y.cross(z);
-  camera_to_world.linear().col(1) = y;
-  camera_to_world.linear().col(2) = z;
-  camera_to_world.translation() = object_to_world * p + standoff * z;
-  const sp::IkResult ik = sp::inverse_kinematics(cell, object_to_world.inverse() * camera_to_world, scan_length);
+  const sp::IkResult ik = sp::look_at(cell, p, standoff, tilt, table, scan_length);
   if (!ik.ok) throw DataError(what + ": the cell cannot reach the scan pose (" + ik.why + ")");
   return ik.q;
 }

@@ -17,7 +17,7 @@ namespace {
 
 using nlohmann::json;
 
-enum class Type { string, integer, number };
+enum class Type { string, integer, number, vec3 };
 struct Field {
   Type type;
   bool required;
@@ -25,7 +25,7 @@ struct Field {
 
 const std::map<std::string, std::map<std::string, Field>>& schema() {
   static const std::map<std::string, std::map<std::string, Field>> s = {
-      {"submit", {{"mesh", {Type::string, true}}, {"spec", {Type::string, false}}, {"settings", {Type::string, false}},
+      {"submit", {{"mesh", {Type::string, false}}, {"bbox_mm", {Type::vec3, false}}, {"spec", {Type::string, false}}, {"settings", {Type::string, false}},
                   {"fit_mm", {Type::number, false}}, {"truth", {Type::string, false}},
                   {"rough_vertices", {Type::integer, false}}}},
       {"status", {{"job", {Type::integer, false}}}},
@@ -40,13 +40,16 @@ const std::map<std::string, std::map<std::string, Field>>& schema() {
   return s;
 }
 
-const char* type_name(Type t) { return t == Type::string ? "a string" : t == Type::integer ? "an integer" : "a number"; }
+const char* type_name(Type t) {
+  return t == Type::string ? "a string" : t == Type::integer ? "an integer" : t == Type::number ? "a number" : "a list of 3 numbers";
+}
 
 bool has_type(const json& v, Type t) {
   switch (t) {
     case Type::string: return v.is_string();
     case Type::integer: return v.is_number_integer();
     case Type::number: return v.is_number();
+    case Type::vec3: return v.is_array() && v.size() == 3 && v[0].is_number() && v[1].is_number() && v[2].is_number();
   }
   return false;
 }

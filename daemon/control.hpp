@@ -5,7 +5,7 @@
 // naming what is wrong; the server keeps running.
 //
 // Commands and fields (required unless marked optional):
-//   submit   mesh (string), spec (string, optional), settings (string, optional), fit_mm (number, optional),
+//   submit   mesh (string) or bbox_mm (3 numbers: start with a rough scan), spec (string, optional), settings (string, optional), fit_mm (number, optional),
 //            truth (string, optional; simulation: the object actually on the table), rough_vertices (integer, optional)
 //   status   job (integer, optional)
 //   list     —

@@ -18,8 +18,8 @@ using namespace std::chrono_literals;
 namespace {
 
 bool runnable(JobState s) {
-  return s == JobState::queued || s == JobState::planning || s == JobState::executing || s == JobState::verifying ||
-         s == JobState::replanning;
+  return s == JobState::queued || s == JobState::rough_scanning || s == JobState::planning || s == JobState::executing ||
+         s == JobState::verifying || s == JobState::replanning;
 }
 
 bool ends_watch(JobState s) { return finished(s) || s == JobState::faulted || s == JobState::paused; }
@@ -213,6 +213,9 @@ json Daemon::handle(const json& req, const std::function<bool(const json&)>& sen
     r.settings = absolute_file(req, "settings");
     r.truth = absolute_file(req, "truth");
     r.fit_mm = req.value("fit_mm", 0.0);
+    if (req.contains("bbox_mm")) r.bbox_mm = Eigen::Vector3d(req["bbox_mm"][0].get<double>(), req["bbox_mm"][1].get<double>(), req["bbox_mm"][2].get<double>());
+    if (r.bbox_mm && r.truth.empty() && config_.scanner_driver == "sim")
+      throw std::invalid_argument("submit: a bounding-box job on the simulated scanner needs 'truth' (what stands on the table)");
     if (req.contains("rough_vertices")) {
       const auto n = req["rough_vertices"].get<std::int64_t>();
       if (n < 50 || n > 200000) throw std::invalid_argument("submit: 'rough_vertices' must be in [50, 200000]");
@@ -225,7 +228,10 @@ json Daemon::handle(const json& req, const std::function<bool(const json&)>& sen
     } catch (const planner::ConfigError& e) {
       throw std::invalid_argument(std::string("submit: config refused: ") + e.what());
     }
-    const std::int64_t id = journal_->create_job(r.mesh, r.to_json().dump());
+    const std::string what = r.bbox_mm ? "bbox:" + std::to_string(r.bbox_mm->x()) + "x" + std::to_string(r.bbox_mm->y()) + "x" +
+                                              std::to_string(r.bbox_mm->z())
+                                        : r.mesh;
+    const std::int64_t id = journal_->create_job(what, r.to_json().dump());
     wake_.notify_all();
     return {{"job", id}, {"state", "queued"}};
   }

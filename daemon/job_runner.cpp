@@ -106,12 +106,18 @@ json JobRequest::to_json() const {
   if (!settings.empty()) j["settings"] = settings;
   if (!truth.empty()) j["truth"] = truth;
   if (rough_vertices) j["rough_vertices"] = *rough_vertices;
+  if (bbox_mm) j["bbox_mm"] = {bbox_mm->x(), bbox_mm->y(), bbox_mm->z()};
   return j;
 }
 
 JobRequest JobRequest::from_json(const json& j) {
   JobRequest r;
-  r.mesh = j.at("mesh").get<std::string>();
+  r.mesh = j.value("mesh", std::string());
+  if (j.contains("bbox_mm")) {
+    const auto v = j["bbox_mm"].get<std::vector<double>>();
+    if (v.size() != 3) throw std::invalid_argument("bbox_mm: three sizes (x, y, z mm)");
+    r.bbox_mm = Eigen::Vector3d(v[0], v[1], v[2]);
+  }
   r.fit_mm = j.value("fit_mm", 0.0);
   r.spec = j.value("spec", std::string());
   r.settings = j.value("settings", std::string());
@@ -121,7 +127,15 @@ JobRequest JobRequest::from_json(const json& j) {
 }
 
 void validate_request(const JobRequest& r) {
-  if (r.mesh.empty()) throw std::invalid_argument("submit: 'mesh' is empty");
+  if (r.mesh.empty() == !r.bbox_mm) throw std::invalid_argument("submit: give 'mesh' (a rough model) or 'bbox_mm' (start with a rough scan), one of them");
+  if (r.bbox_mm && !(r.bbox_mm->minCoeff() > 0.0 && r.bbox_mm->maxCoeff() < 1000.0))
+    throw std::invalid_argument("submit: 'bbox_mm' sizes must be in (0, 1000) mm");
+  if (r.bbox_mm) {
+    if (!r.truth.empty()) load_object(r.truth, r.fit_mm);
+    if (!r.spec.empty()) sp::load_spec(r.spec);
+    if (!r.settings.empty()) sp::load_planner_settings(r.settings);
+    return;
+  }
   if (!(r.fit_mm >= 0.0) || !std::isfinite(r.fit_mm)) throw std::invalid_argument("submit: 'fit_mm' must be > 0");
   if (r.rough_vertices && (*r.rough_vertices < 50 || *r.rough_vertices > 200000))
     throw std::invalid_argument("submit: 'rough_vertices' must be in [50, 200000]");
@@ -143,6 +157,8 @@ struct JobRunner::Job {
   std::unique_ptr<sp::ModelCloud> cloud;  // what views register to: the rough model, then the registered views
   std::unique_ptr<ScanHead> head;
   sp::CellModel cell;               // with the object's placement on the table
+  sp::TriangleMesh truth_table;     // simulation, bounding-box jobs: the object as it stands on the table
+  sp::TriangleMesh truth_object;    // simulation: the object on the table, in the plan's object frame
   std::vector<std::uint32_t> unmeasurable;  // rows no candidate of the first plan measures
   Progress progress;
   int round = 0;
@@ -176,8 +192,9 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
                  {"estimated_coverage", j.estimated_total}};
   int views = 0;
   std::vector<sp::RangeImage> images;
-  for (auto plan : journal_.plans(j.id))
+  for (const auto& [plan, round] : journal_.plan_rounds(j.id))
     for (const auto& s : journal_.scans(plan)) {
+      if (round < 0) continue;  // the rough scan's images are in the table frame and far out
       ++views;
       if (state != JobState::aborted && s.note.empty()) images.push_back(sp::range_image_from_ply(journal_.read_scan(s), s.file));
     }
@@ -225,9 +242,9 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
     result["verified_coverage"] = truth.coverage();
   }
   // Simulation: verified measurability of the stored scans against the object actually on the table.
-  if (state != JobState::aborted && !images.empty()) {
+  if (state != JobState::aborted && !images.empty() && !j.truth_object.vertices.empty()) {
     const std::string truth = j.request.truth.empty() ? j.request.mesh : j.request.truth;
-    const sp::TriangleMesh fine = load_object(truth, j.request.fit_mm);
+    const sp::TriangleMesh& fine = j.truth_object;
     const sp::Verification v = sp::verify_images(fine, j.spec, images);
     result["verified_mv"] = v.mv;
     result["verified_against"] = truth;
@@ -255,7 +272,8 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
     j.settings = j.request.settings.empty() ? models_.settings : sp::load_planner_settings(j.request.settings);
     if (j.request.rough_vertices) j.rough_options.target_vertices = *j.request.rough_vertices;
     j.rough_options.seed = j.settings.seed;
-    j.object = load_object(j.request.mesh, j.request.fit_mm);
+    if (!j.request.bbox_mm) j.object = load_object(j.request.mesh, j.request.fit_mm);
+    else if (j.request.truth.empty()) throw sp::DataError("a bounding-box job needs 'truth' in simulation: what stands on the table");
   } catch (const std::exception& e) {
     j.progress.fault_kind = "job";
     transition(j, JobState::faulted, std::string("job input: ") + e.what());
@@ -263,7 +281,15 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
   }
 
   try {
-    auto plans = journal_.plans(id);
+    // Rounds 0, 1, ... are plan rounds; round -1 is the rough scan of a bounding-box job.
+    auto round_plans = [&] {
+      std::vector<std::int64_t> out;
+      for (const auto& [plan, round] : journal_.plan_rounds(id))
+        if (round >= 0) out.push_back(plan);
+      return out;
+    };
+    if (j.request.bbox_mm) rough_scan(j, stop);
+    auto plans = round_plans();
     if (plans.empty()) {
       transition(j, JobState::planning);
       sp::ViewPlan p = sp::plan_views(j.object, models_.sensor, j.spec, j.settings, j.rough_options,
@@ -293,7 +319,7 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
         return JobState::stalled;
       }
       journal_.add_plan(id, 0, poses, info.dump());
-      plans = journal_.plans(id);
+      plans = round_plans();
     }
     // The first round's info carries the placement and the rows nothing can measure in this cell.
     const json info0 = json::parse(journal_.plan_info(plans.front()));
@@ -318,12 +344,16 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
     if (j.cloud && !cloud_points.empty()) j.cloud->add(cloud_points, cloud_normals);
     j.progress.measured = j.coverage->coverage();
 
-    // What is on the table, for a simulated head: the object (ground truth) and the plate.
-    {
-      const std::string truth = j.request.truth.empty() ? j.request.mesh : j.request.truth;
-      const sp::TriangleMesh object = load_object(truth, j.request.fit_mm);
-      j.head = heads_(sp::with_fixtures(object, j.cell), object.triangles.size(), j.cell);
+    // What is on the table, for a simulated head: the object (ground truth) in the plan's object frame, and
+    // the plate.
+    if (j.request.bbox_mm) {
+      j.truth_object = j.truth_table;
+      const Eigen::Isometry3d table_to_object = j.cell.object_on_table.inverse();
+      for (auto& v : j.truth_object.vertices) v = table_to_object * v;
+    } else {
+      j.truth_object = load_object(j.request.truth.empty() ? j.request.mesh : j.request.truth, j.request.fit_mm);
     }
+    j.head = heads_(sp::with_fixtures(j.truth_object, j.cell), j.truth_object.triangles.size(), j.cell);
 
     while (true) {
       const std::int64_t plan = plans.back();
@@ -418,7 +448,7 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
                           {"candidates", p.candidates},
                           {"plan_s", p.times.total_s()}};
       journal_.add_plan(id, j.round + 1, poses, rinfo.dump());
-      plans = journal_.plans(id);
+      plans = round_plans();
     }
   } catch (const Interrupted& e) {
     positioner_.halt_all();
@@ -447,6 +477,72 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
     transition(j, JobState::faulted, e.what());
     return JobState::faulted;
   }
+}
+
+void JobRunner::rough_scan(Job& j, const std::atomic<int>& stop) {
+  // The table frame is the object frame of the rough scan: the rough model comes out standing on the table.
+  sp::CellModel table_cell = models_.cell;
+  table_cell.object_on_table = Eigen::Isometry3d::Identity();
+  {
+    // Simulation: the object stands centred on the turntable, its base on the table top.
+    j.truth_table = load_object(j.request.truth, j.request.fit_mm);
+    Eigen::AlignedBox3d box;
+    for (const auto& v : j.truth_table.vertices) box.extend(v);
+    const Eigen::Vector3d shift(-box.center().x(), -box.center().y(), -box.min().z());
+    for (auto& v : j.truth_table.vertices) v += shift;
+  }
+  const auto dir = settings_.jobs_dir / std::to_string(j.id);
+  const auto rough_file = dir / "rough.off";
+  std::optional<std::int64_t> plan;
+  for (const auto& [p, round] : journal_.plan_rounds(j.id))
+    if (round == -1) plan = p;
+  if (!plan) {
+    transition(j, JobState::rough_scanning);
+    std::vector<std::string> skipped;
+    const auto views = sp::exploration_views(table_cell, models_.sensor, *j.request.bbox_mm, settings_.rough_scan, &skipped);
+    std::vector<std::string> poses;
+    for (const auto& v : views) poses.push_back(json({{"axes", v.q}, {"scan_length_mm", v.scan_length_mm}}).dump());
+    plan = journal_.add_plan(j.id, -1, poses, json({{"rough_scan", true}, {"skipped", skipped}}).dump());
+    for (const auto& s : skipped) journal_.event(j.id, "rough scan: skipped " + s);
+  }
+  if (!std::filesystem::exists(rough_file)) {
+    if (j.progress.state != JobState::rough_scanning) transition(j, JobState::rough_scanning, "resuming");
+    const auto views = journal_.views(*plan);
+    j.progress.views = static_cast<int>(views.size());
+    // The scanner sees the table too: its samples carve the space above it (the fusion's floor keeps the
+    // table itself out of the model), so the table's own triangles give samples here.
+    const sp::TriangleMesh scene = sp::with_fixtures(j.truth_table, table_cell);
+    auto head = heads_(scene, scene.triangles.size(), table_cell);
+    for (const auto& v : views) {
+      if (v.stored) continue;
+      const auto why = static_cast<StopRequest>(stop.load());
+      if (why != StopRequest::none) throw Interrupted(why, "before rough-scan view " + std::to_string(v.index + 1));
+      const json pj = json::parse(v.pose_json);
+      j.progress.view = v.index + 1;
+      const Acquisition got = acquire_view(positioner_, *head, table_cell, models_.sensor, pj.at("axes").get<std::vector<double>>(),
+                                           pj.at("scan_length_mm").get<double>(), settings_, stop, [&](const std::string& what) {
+                                             j.progress.event = "rough scan " + std::to_string(v.index + 1) + "/" + std::to_string(views.size()) + ": " + what;
+                                             report_(j.progress);
+                                           });
+      journal_.store_scan(*plan, v.index, sp::range_image_to_ply(got.image), "rough scan");
+      journal_.event(j.id, "rough scan " + std::to_string(v.index + 1) + "/" + std::to_string(views.size()) + " stored: " +
+                               std::to_string(got.image.valid_count()) + " samples");
+    }
+    // Fuse what the exploration saw; what it did not see closes conservatively (hypothetical).
+    sp::FusionOptions fo = settings_.rough_scan.fusion;
+    fo.floor_z_mm = 0.0;
+    sp::TsdfVolume volume(sp::exploration_bounds(*j.request.bbox_mm), fo);
+    for (const auto& s : journal_.scans(*plan)) volume.integrate(sp::range_image_from_ply(journal_.read_scan(s), s.file));
+    const sp::FusedModel fused = volume.extract();
+    if (fused.mesh.triangles.empty()) throw sp::DataError("rough scan: the fused volume holds no surface (is the object on the table?)");
+    std::size_t guessed = 0;
+    for (auto h : fused.hypothetical) guessed += h;
+    std::filesystem::create_directories(dir);
+    sp::write_off(fused.mesh, rough_file.string());
+    journal_.event(j.id, "rough model: " + std::to_string(fused.mesh.vertices.size()) + " vertices, " + std::to_string(guessed) +
+                             " hypothetical (unseen, closed conservatively), voxel " + fmt(volume.voxel_mm(), 2) + " mm -> " + rough_file.string());
+  }
+  j.object = sp::load_mesh(rough_file);
 }
 
 void JobRunner::execute_view(Job& j, std::int64_t plan, const ViewRecord& v, const std::atomic<int>& stop) {

@@ -27,6 +27,7 @@
 #include "planner/measured_coverage.hpp"
 #include "planner/plan.hpp"
 #include "planner/registration.hpp"
+#include "planner/rough_scan.hpp"
 
 namespace scancell::daemon {
 
@@ -80,6 +81,7 @@ struct JobSettings {
     return o;
   }();
   std::filesystem::path jobs_dir;                  // per-job outputs (coverage picture, unmeasured rows)
+  planner::ExplorationOptions rough_scan;          // jobs that start from a bounding box
 };
 
 /// The models a job plans and executes with (the daemon's configuration; defaults for spec and settings).
@@ -97,6 +99,9 @@ struct JobRequest {
   std::string spec, settings;          // optional overrides (absolute paths)
   std::string truth;                   // simulation: the object actually on the table (default: mesh)
   std::optional<std::size_t> rough_vertices;
+  /// Instead of a mesh: the object's approximate size (x, y, z mm), standing centred on the turntable. The
+  /// job then starts with a rough scan and plans from the rough model it fuses.
+  std::optional<Eigen::Vector3d> bbox_mm;
   nlohmann::json to_json() const;
   static JobRequest from_json(const nlohmann::json& j);
 };
@@ -131,6 +136,8 @@ class JobRunner {
  private:
   struct Job;
   void execute_view(Job& j, std::int64_t plan, const ViewRecord& v, const std::atomic<int>& stop);
+  /// The rough scan of a job given a bounding box: exploration views, stored, fused into jobs/ID/rough.off.
+  void rough_scan(Job& j, const std::atomic<int>& stop);
   void finish(Job& j, JobState state, const std::string& cause);
   void transition(Job& j, JobState s, const std::string& cause = "");
 

@@ -16,7 +16,7 @@ namespace scancell::daemon {
 namespace {
 
 const std::map<JobState, const char*> kNames = {
-    {JobState::queued, "queued"},     {JobState::planning, "planning"}, {JobState::executing, "executing"},
+    {JobState::queued, "queued"},     {JobState::rough_scanning, "rough_scanning"}, {JobState::planning, "planning"}, {JobState::executing, "executing"},
     {JobState::verifying, "verifying"}, {JobState::replanning, "replanning"}, {JobState::paused, "paused"}, {JobState::done, "done"},
     {JobState::stalled, "stalled"},   {JobState::aborted, "aborted"},   {JobState::faulted, "faulted"},
     {JobState::failed, "failed"}};
@@ -198,6 +198,15 @@ std::vector<std::int64_t> Journal::plans(std::int64_t job) {
   Stmt s(db_, "SELECT id FROM plans WHERE job = ? ORDER BY round");
   s.bind(1, job);
   while (s.step()) out.push_back(s.i64(0));
+  return out;
+}
+
+std::vector<std::pair<std::int64_t, int>> Journal::plan_rounds(std::int64_t job) {
+  std::lock_guard<std::recursive_mutex> lock(mu_);
+  std::vector<std::pair<std::int64_t, int>> out;
+  Stmt s(db_, "SELECT id, round FROM plans WHERE job = ? ORDER BY round");
+  s.bind(1, job);
+  while (s.step()) out.emplace_back(s.i64(0), static_cast<int>(s.i64(1)));
   return out;
 }
 

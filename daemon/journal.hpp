@@ -16,7 +16,8 @@ struct sqlite3;
 
 namespace scancell::daemon {
 
-enum class JobState { queued, planning, executing, verifying, replanning, paused, done, stalled, aborted, faulted, failed };
+enum class JobState { queued, rough_scanning, planning, executing, verifying, replanning, paused, done, stalled, aborted, faulted,
+                      failed };
 const char* to_string(JobState s);
 JobState job_state_from(const std::string& s);  // throws std::invalid_argument
 bool finished(JobState s);                     // done, stalled, aborted, failed
@@ -67,8 +68,9 @@ class Journal {
   /// (`info`, JSON), in one transaction; returns the plan id.
   std::int64_t add_plan(std::int64_t job, int round, const std::vector<std::string>& view_poses,
                         const std::string& info = "{}");
-  /// Plan ids of a job in round order.
+  /// Plan ids of a job in round order (round -1: the rough scan, when the job made one).
   std::vector<std::int64_t> plans(std::int64_t job);
+  std::vector<std::pair<std::int64_t, int>> plan_rounds(std::int64_t job);  // (plan id, round)
   std::string plan_info(std::int64_t plan);
   /// The job's outcome summary (JSON), kept with the job.
   void set_result(std::int64_t job, const std::string& result_json);

@@ -111,6 +111,18 @@ Eigen::Isometry3d forward_kinematics(const CellModel& c, const JointVector& q) {
   return object_to_world.inverse() * camera_to_world;
 }
 
+IkResult look_at(const CellModel& cell, const Eigen::Vector3d& p, double standoff, double tilt, double table,
+                 double scan_length) {
+  const Eigen::Isometry3d object_to_world = table_to_world(cell, table) * cell.object_on_table;
+  const Eigen::Vector3d z(std::cos(tilt), 0.0, std::sin(tilt)), y = Eigen::Vector3d::UnitY();
+  Eigen::Isometry3d camera_to_world = Eigen::Isometry3d::Identity();
+  camera_to_world.linear().col(0) = y.cross(z);
+  camera_to_world.linear().col(1) = y;
+  camera_to_world.linear().col(2) = z;
+  camera_to_world.translation() = object_to_world * p + standoff * z;
+  return inverse_kinematics(cell, object_to_world.inverse() * camera_to_world, scan_length);
+}
+
 IkResult inverse_kinematics(const CellModel& c, const Eigen::Isometry3d& desired, double scan_length_mm,
                             const JointVector* seed) {
   IkResult res;

@@ -99,6 +99,12 @@ Eigen::Isometry3d table_to_world(const CellModel& cell, double angle_rad);
 IkResult inverse_kinematics(const CellModel& cell, const Eigen::Isometry3d& camera_to_object, double scan_length_mm,
                             const JointVector* seed = nullptr);
 
+/// Axis positions that put a camera tilted by `tilt_rad` (boresight in the world x-z plane, camera y along
+/// world Y, as turntable_lift_tilt keeps it) `standoff_mm` from the object-frame point `p`, the turntable at
+/// `table_rad`. Used for scans the cell plans for itself (rough scan, calibration).
+IkResult look_at(const CellModel& cell, const Eigen::Vector3d& p, double standoff_mm, double tilt_rad, double table_rad,
+                 double scan_length_mm);
+
 /// Thesis 6.3.2: the reachable pose nearest a desired one. turntable_lift_tilt: the boresight and the
 /// camera position are kept and the view is turned about its boresight until the baseline is horizontal
 /// (the nearer of the two ways that the tilt range allows); arm_turntable: the pose itself when reachable.

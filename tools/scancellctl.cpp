@@ -169,7 +169,11 @@ int main(int argc, char** argv) {
   int rough_vertices = 0;
   bool then_watch = false;
   auto* submit = app.add_subcommand("submit", "queue a scan job on an object's rough model");
-  submit->add_option("--mesh", mesh, "rough model of the object (OFF, PLY, OBJ, STL)")->required()->check(CLI::ExistingFile);
+  std::vector<double> bbox;
+  auto* mesh_opt = submit->add_option("--mesh", mesh, "rough model of the object (OFF, PLY, OBJ, STL)")->check(CLI::ExistingFile);
+  auto* bbox_opt = submit->add_option("--bbox-mm", bbox, "instead of a mesh: the object's size X Y Z (mm); the job starts with a rough scan")
+                       ->expected(3)->delimiter(',');
+  mesh_opt->excludes(bbox_opt);
   submit->add_option("--fit-mm", fit_mm, "scale so the longest side is this many mm (default: the mesh is in mm)")->check(CLI::PositiveNumber);
   submit->add_option("--spec", spec, "model specification (YAML; default: the daemon's)")->check(CLI::ExistingFile);
   submit->add_option("--settings", settings, "planner settings (YAML; default: the daemon's)")->check(CLI::ExistingFile);
@@ -207,7 +211,12 @@ int main(int argc, char** argv) {
     if (cmd == "watch") return watch(c, job, as_json);
     json req = {{"cmd", cmd}};
     if (cmd == "submit") {
-      req["mesh"] = absolute(mesh);
+      if (mesh.empty() == bbox.empty()) {
+        std::cerr << "scancellctl: submit needs --mesh or --bbox-mm, one of them\n";
+        return 2;
+      }
+      if (!mesh.empty()) req["mesh"] = absolute(mesh);
+      if (!bbox.empty()) req["bbox_mm"] = bbox;
       if (fit_mm > 0.0) req["fit_mm"] = fit_mm;
       if (!spec.empty()) req["spec"] = absolute(spec);
       if (!settings.empty()) req["settings"] = absolute(settings);

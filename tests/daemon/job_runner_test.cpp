@@ -244,6 +244,38 @@ TEST_F(SimCell, RegistrationPutsSamplesWhereTheyReallyAreUnderPoseError) {
   EXPECT_LT(with, 0.25 * without);
 }
 
+TEST_F(SimCell, FromABoundingBoxRoughScanThenPlanAndMeasure) {
+  // Nothing known but the object's size: the rough scan's exploration views are fused into a closed rough
+  // model standing on the table (the underside hypothetical), then the usual plan-execute-replan loop.
+  const std::string cube = write_cube(dir);
+  JobRequest r;
+  r.bbox_mm = Eigen::Vector3d(60, 60, 60);
+  r.truth = cube;
+  r.rough_vertices = 600;
+  validate_request(r);
+  const auto job = journal->create_job("bbox", r.to_json().dump());
+  std::atomic<int> stop{0};
+  auto runner_ = runner();
+  const JobState end = runner_.run(job, stop);
+  ASSERT_TRUE(end == JobState::done || end == JobState::stalled) << journal->job(job).cause;
+  const auto ev = journal->events(job);
+  EXPECT_TRUE(std::any_of(ev.begin(), ev.end(), [](const std::string& e) { return e.rfind("rough_scanning", 0) == 0; }));
+  // The rough model: within 1.5 voxels of the cube's faces where measured, closed underneath.
+  const sp::TriangleMesh rough = sp::load_mesh(dir / "data" / "jobs" / std::to_string(job) / "rough.off");
+  double worst = 0.0;
+  for (const auto& p : rough.vertices) {
+    const Eigen::Vector3d q = p - Eigen::Vector3d(-25, -25, 0);  // the cube stands centred on the table
+    const Eigen::Vector3d hi = Eigen::Vector3d::Constant(50) - q;
+    worst = std::max(worst, std::min({std::abs(q.x()), std::abs(q.y()), std::abs(q.z()), std::abs(hi.x()), std::abs(hi.y()), std::abs(hi.z())}));
+  }
+  EXPECT_LT(worst, 2.5);
+  const auto result = nlohmann::json::parse(journal->job(job).result_json);
+  std::cout << "bbox job: rough model " << rough.vertices.size() << " vertices (worst " << worst << " mm from the cube), " << result["views"]
+            << " views, measured " << result["measured_coverage"] << ", verified m_v " << result["verified_mv"] << "\n";
+  EXPECT_NEAR(result["verified_mv"].get<double>(), 5.0 / 6.0, 0.06);
+  EXPECT_TRUE(journal->check().empty());
+}
+
 TEST(JobRequest, BadInputIsRefusedNamingTheFile) {
   JobRequest r;
   r.mesh = src("../shared/bad-inputs/does-not-exist.stl");
