@@ -45,6 +45,16 @@ Samples samples_of(const sp::RangeImage& img) {
   return s;
 }
 
+/// View-frame samples whose target-frame position passes `keep` (on the plate, on the ramp's face).
+template <class Keep>
+std::vector<Eigen::Vector3d> view_points_where(const sp::RangeImage& img, Keep keep) {
+  const Samples smp = samples_of(img);
+  std::vector<Eigen::Vector3d> out;
+  for (std::size_t i = 0; i < smp.view.size(); ++i)
+    if (keep(smp.target[i])) out.push_back(smp.view[i]);
+  return out;
+}
+
 double tan_x(const sp::SensorModel& s, int i) { return std::tan(-0.5 * s.fov_x_rad + s.fov_x_rad * i / (s.samples_x - 1)); }
 
 /// Incidence angles of the virtual scanner (planner/virtual_scanner.cpp) for a plane normal `n` in the view
@@ -122,10 +132,7 @@ SensorResult run_sensor(const RunContext& ctx, const SensorRunOptions& o) {
                                       std::numbers::pi, o.scan_length_mm, what);
     const sp::RangeImage img = ctx.scan(q, o.scan_length_mm);
     ++r.scans;
-    Samples smp = samples_of(img);
-    std::vector<Eigen::Vector3d> pts;
-    for (std::size_t i = 0; i < smp.view.size(); ++i)
-      if (on_plate(smp.target[i])) pts.push_back(smp.view[i]);
+    const std::vector<Eigen::Vector3d> pts = view_points_where(img, on_plate);
     if (pts.size() < 1000)
       throw DataError(what + ": " + std::to_string(pts.size()) + " samples on the plate (at least 1000 needed; is the plate on the table?)");
     PlaneFit f = fit_plane(pts, what);
@@ -164,10 +171,7 @@ SensorResult run_sensor(const RunContext& ctx, const SensorRunOptions& o) {
                                       std::numbers::pi, o.scan_length_mm, what);
     const sp::RangeImage img = ctx.scan(q, o.scan_length_mm);
     ++r.scans;
-    Samples smp = samples_of(img);
-    std::vector<Eigen::Vector3d> pts;
-    for (std::size_t i = 0; i < smp.view.size(); ++i)
-      if (on_plate(smp.target[i])) pts.push_back(smp.view[i]);
+    const std::vector<Eigen::Vector3d> pts = view_points_where(img, on_plate);
     // The plane from the samples where there are enough, else from the model: the plate's top in the view.
     Eigen::Vector3d n, p;
     if (pts.size() >= 200) {
@@ -229,10 +233,7 @@ SensorResult run_sensor(const RunContext& ctx, const SensorRunOptions& o) {
     ++r.scans;
     const Eigen::Isometry3d to_view = img.pose.camera_to_object.inverse();
     Eigen::Vector3d n = to_view.linear() * ramp.normal(), p = to_view * ramp.centre();
-    Samples smp = samples_of(img);
-    std::vector<Eigen::Vector3d> pts;
-    for (std::size_t i = 0; i < smp.view.size(); ++i)
-      if (on_face(smp.target[i])) pts.push_back(smp.view[i]);
+    const std::vector<Eigen::Vector3d> pts = view_points_where(img, on_face);
     if (pts.size() >= 200) {
       const PlaneFit f = fit_plane(pts, what);
       n = oriented(f.normal, n);

@@ -85,6 +85,19 @@ class SimHead : public ScanHead {
   dr::SimScanner scanner_;
 };
 
+/// The journal's record of each view of a plan: pose, scan length, axis targets, planned move and scan times.
+std::vector<std::string> view_records(const sp::ViewPlan& p) {
+  std::vector<std::string> out;
+  for (std::size_t k = 0; k < p.views.size(); ++k)
+    out.push_back(json({{"camera_to_object", matrix_json(p.views[k].transform())},
+                        {"scan_length_mm", p.views[k].scan_length_mm},
+                        {"axes", p.view_axes.at(k)},
+                        {"move_s", p.view_move_s.at(k)},
+                        {"scan_s", p.view_scan_s.at(k)}})
+                      .dump());
+  return out;
+}
+
 sp::TriangleMesh load_object(const std::string& path, double fit_mm) {
   sp::TriangleMesh m = sp::load_mesh(path);
   if (fit_mm > 0.0) sp::apply_scale(m, sp::fit_scale(m, fit_mm));
@@ -296,14 +309,7 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
                                       settings_.planner_threads, &models_.cell);
       j.rough = p.rough;
       j.unmeasurable = p.cover.unmeasurable_rows;
-      std::vector<std::string> poses;
-      for (std::size_t k = 0; k < p.views.size(); ++k)
-        poses.push_back(json({{"camera_to_object", matrix_json(p.views[k].transform())},
-                              {"scan_length_mm", p.views[k].scan_length_mm},
-                              {"axes", p.view_axes.at(k)},
-                              {"move_s", p.view_move_s.at(k)},
-                              {"scan_s", p.view_scan_s.at(k)}})
-                            .dump());
+      const std::vector<std::string> poses = view_records(p);
       const double est = p.cover.cumulative_fraction.empty() ? 0.0 : p.cover.cumulative_fraction.back();
       const json info = {{"round", 0},
                          {"rows", p.rough.size()},
@@ -429,14 +435,7 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
         finish(j, JobState::stalled, "replan adds nothing: " + summary);
         return JobState::stalled;
       }
-      std::vector<std::string> poses;
-      for (std::size_t k = 0; k < p.views.size(); ++k)
-        poses.push_back(json({{"camera_to_object", matrix_json(p.views[k].transform())},
-                              {"scan_length_mm", p.views[k].scan_length_mm},
-                              {"axes", p.view_axes.at(k)},
-                              {"move_s", p.view_move_s.at(k)},
-                              {"scan_s", p.view_scan_s.at(k)}})
-                            .dump());
+      const std::vector<std::string> poses = view_records(p);
       const double est_rest = p.cover.cumulative_fraction.empty() ? 0.0 : p.cover.cumulative_fraction.back();
       double rest_area = 0.0;
       for (std::size_t r = 0; r < measured.size(); ++r) rest_area += measured[r] ? 0.0 : j.rough->area_mm2[r];

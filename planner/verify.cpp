@@ -98,6 +98,16 @@ std::vector<std::uint8_t> vertices_measured(const TriangleMesh& fine, const std:
   return hit;
 }
 
+/// Each fine vertex's share of the area (a third of each adjacent triangle) and the total.
+void share_area(const TriangleMesh& fine, Verification& out) {
+  out.vertex_area_mm2.assign(fine.vertices.size(), 0.0);
+  for (const auto& t : fine.triangles) {
+    const double a = triangle_area(fine, t) / 3.0;
+    for (int k = 0; k < 3; ++k) out.vertex_area_mm2[t[k]] += a;
+  }
+  for (double a : out.vertex_area_mm2) out.area_mm2 += a;
+}
+
 }  // namespace
 
 Verification verify_views(const TriangleMesh& fine, const SensorModel& sensor, const ModelSpec& spec,
@@ -106,12 +116,7 @@ Verification verify_views(const TriangleMesh& fine, const SensorModel& sensor, c
   const auto t0 = std::chrono::steady_clock::now();
   Verification out;
   const std::size_t nv = fine.vertices.size();
-  out.vertex_area_mm2.assign(nv, 0.0);
-  for (const auto& t : fine.triangles) {
-    const double a = triangle_area(fine, t) / 3.0;
-    for (int k = 0; k < 3; ++k) out.vertex_area_mm2[t[k]] += a;
-  }
-  for (double a : out.vertex_area_mm2) out.area_mm2 += a;
+  share_area(fine, out);
   const auto vertex_normals = area_weighted_normals(fine);
   const auto tri_normals = face_normals(fine);
   TriangleMesh scene_mesh = fine;
@@ -186,12 +191,7 @@ Verification verify_images(const TriangleMesh& fine, const ModelSpec& spec, cons
   const auto t0 = std::chrono::steady_clock::now();
   Verification out;
   const std::size_t nv = fine.vertices.size();
-  out.vertex_area_mm2.assign(nv, 0.0);
-  for (const auto& t : fine.triangles) {
-    const double a = triangle_area(fine, t) / 3.0;
-    for (int k = 0; k < 3; ++k) out.vertex_area_mm2[t[k]] += a;
-  }
-  for (double a : out.vertex_area_mm2) out.area_mm2 += a;
+  share_area(fine, out);
   const auto vertex_normals = area_weighted_normals(fine);
   const auto tri_normals = face_normals(fine);
   out.measured.assign(nv, 0);
