@@ -113,7 +113,8 @@ CalibrationRecord record_of(const SensorResult& r, const std::string& cell) {
   json noise = json::array();
   for (const auto& n : r.noise) noise.push_back({{"depth_mm", n.depth_mm}, {"sigma_z_mm", n.sigma_z_mm}, {"samples", n.samples}});
   c.inputs = {{"scans", r.scans}, {"plate_standoffs", r.noise.size()}, {"ramp_scans", r.yield_vs_theta_yz.size()}};
-  c.values = {{"noise_cz_per_mm", est(r.cz_per_mm)}, {"grazing_xz_rad", est(r.t_xz_rad)}, {"grazing_yz_rad", est(r.t_yz_rad)}};
+  c.values = {{"noise_cz_per_mm", est(r.cz_per_mm)}, {"noise_cx", est(r.cx)}, {"noise_cy", est(r.cy)},
+              {"grazing_xz_rad", est(r.t_xz_rad)}, {"grazing_yz_rad", est(r.t_yz_rad)}};
   c.residuals = {{"noise_fit_rms_mm", r.noise_fit_rms_mm}, {"noise_by_depth", noise}};
   return c;
 }
@@ -200,6 +201,9 @@ std::vector<std::string> apply_calibration(const CalibrationRecord& r, sp::Senso
   };
   if (r.kind == "sensor") {
     set("noise_cz_per_mm", s.noise_cz_per_mm, number(r, "noise_cz_per_mm", where), 0.0, 1e-3);
+    // Older sensor files may lack the lateral coefficients: they then leave them as they are.
+    if (r.values.contains("noise_cx")) set("noise_cx", s.noise_cx, number(r, "noise_cx", where), -1e-12, 1e-2);
+    if (r.values.contains("noise_cy")) set("noise_cy", s.noise_cy, number(r, "noise_cy", where), -1e-12, 1e-2);
     set("grazing_xz_rad", s.grazing_xz_rad, number(r, "grazing_xz_rad", where), 0.0, 1.5707963267948966);
     set("grazing_yz_rad", s.grazing_yz_rad, number(r, "grazing_yz_rad", where), 0.0, 1.5707963267948966);
   } else if (r.kind == "turntable_axis") {

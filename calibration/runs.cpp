@@ -122,7 +122,12 @@ SensorResult run_sensor(const RunContext& ctx, const SensorRunOptions& o) {
 
   // 1. Depth noise against range: the residuals of each plate scan normal to its fitted plane, with the
   //    (model) lateral noise's share removed, give σz at that depth; σz = C_z z² by least squares.
-  std::vector<double> z2, sig;
+  // A plane scan kept for the fits: its view-frame samples and fitted plane.
+  struct PlaneScan {
+    std::vector<Eigen::Vector3d> pts;
+    Eigen::Vector3d n, p0;
+  };
+  std::vector<PlaneScan> noise_scans, oblique_scans;
   for (int k = 0; k < o.standoffs; ++k) {
     const double span = s.range_max_mm - s.range_min_mm;
     const double standoff = s.range_min_mm + span * (0.1 + 0.75 * k / std::max(1, o.standoffs - 1));
@@ -137,28 +142,14 @@ SensorResult run_sensor(const RunContext& ctx, const SensorRunOptions& o) {
       throw DataError(what + ": " + std::to_string(pts.size()) + " samples on the plate (at least 1000 needed; is the plate on the table?)");
     PlaneFit f = fit_plane(pts, what);
     f.normal = oriented(f.normal, -f.point);
-    double acc = 0.0;
-    std::vector<double> depths;
-    for (const auto& p : pts) {
-      const double z = -p.z();
-      depths.push_back(z);
-      const double res = (p - f.point).dot(f.normal);
-      const double lateral = std::pow(f.normal.x() * s.noise_cx * z, 2) + std::pow(f.normal.y() * s.noise_cy * z, 2);
-      acc += (res * res - lateral) / (f.normal.z() * f.normal.z() * z * z * z * z);
-    }
-    std::nth_element(depths.begin(), depths.begin() + static_cast<long>(depths.size() / 2), depths.end());
-    const double zm = depths[depths.size() / 2];
-    const double c2 = acc / static_cast<double>(pts.size() - 3);
-    if (!(c2 > 0.0)) throw DataError(what + ": no depth noise left after the lateral share (plate not flat?)");
-    const double sigma = std::sqrt(c2) * zm * zm;
-    r.noise.push_back({zm, sigma, pts.size()});
-    z2.push_back(zm * zm);
-    sig.push_back(sigma);
-    ctx.log(what + ": depth " + std::to_string(zm) + " mm, sigma_z " + std::to_string(sigma) + " mm from " + std::to_string(pts.size()) + " samples");
+    noise_scans.push_back({pts, f.normal, f.point});
   }
-  const ProportionalFit cz = fit_proportional(z2, sig, "C_z fit");
-  r.cz_per_mm = {cz.k, std::max(cz.ci95(), 1.96 * cz.k / std::sqrt(2.0 * static_cast<double>(r.noise.front().samples)))};
-  r.noise_fit_rms_mm = cz.rms;
+  // Lateral noise (eq. 3.3): on a plane whose normal n leans in the camera's x or y, the residuals normal to
+  // it carry n_x σx and n_y σy beside n_z σz: r² ≈ (n_x z)² C_x² + (n_y z)² C_y² + (n_z σz)², σz known now,
+  // linear in (C_x², C_y²). The grazing plate scans lean in x, the ramp scans in y.
+  auto lateral = [&](const std::vector<Eigen::Vector3d>& pts, const Eigen::Vector3d& n, const Eigen::Vector3d& p0) {
+    oblique_scans.push_back({pts, n, p0});
+  };
 
   // 2. t_xz: the plate seen ever more obliquely; within a scan θ_xz sweeps across the fan, so the threshold
   //    is the edge between rays that return and rays that do not.
@@ -178,6 +169,7 @@ SensorResult run_sensor(const RunContext& ctx, const SensorRunOptions& o) {
       const PlaneFit f = fit_plane(pts, what);
       n = oriented(f.normal, -f.point);
       p = f.point;
+      lateral(pts, n, p);
     } else {
       const Eigen::Isometry3d to_view = img.pose.camera_to_object.inverse();
       n = to_view.linear() * Eigen::Vector3d::UnitZ();
@@ -238,6 +230,7 @@ SensorResult run_sensor(const RunContext& ctx, const SensorRunOptions& o) {
       const PlaneFit f = fit_plane(pts, what);
       n = oriented(f.normal, n);
       p = f.point;
+      lateral(pts, n, p);
     }
     std::size_t eligible = 0, returned = 0;
     for (const auto& x : rays_on_plane(img, s, n, p, on_face))
@@ -286,6 +279,69 @@ SensorResult run_sensor(const RunContext& ctx, const SensorRunOptions& o) {
   }
   r.t_yz_rad = {0.5 * (th_lo + th_hi), std::max(0.5 * std::abs(th_lo - th_hi), 1e-4)};
   ctx.log("t_yz " + deg(r.t_yz_rad.value) + " ± " + deg(r.t_yz_rad.ci95));
+  // σz per stand-off (C_z) and the lateral coefficients (C_x, C_y) each need the other to remove its share
+  // of the residuals: alternate, starting from the model's C_x, C_y.
+  double cx = s.noise_cx, cy = s.noise_cy;
+  for (int pass = 0; pass < 4; ++pass) {
+    std::vector<double> z2, sig;
+    r.noise.clear();
+    for (const auto& sc : noise_scans) {
+      double acc = 0.0;
+      std::vector<double> depths;
+      for (const auto& p : sc.pts) {
+        const double z = -p.z(), res = (p - sc.p0).dot(sc.n);
+        depths.push_back(z);
+        const double lateral_share = std::pow(sc.n.x() * cx * z, 2) + std::pow(sc.n.y() * cy * z, 2);
+        acc += (res * res - lateral_share) / (sc.n.z() * sc.n.z() * z * z * z * z);
+      }
+      std::nth_element(depths.begin(), depths.begin() + static_cast<long>(depths.size() / 2), depths.end());
+      const double zm = depths[depths.size() / 2], c2 = acc / static_cast<double>(sc.pts.size() - 3);
+      if (!(c2 > 0.0)) throw DataError("noise scans: no depth noise left after the lateral share (plate not flat?)");
+      r.noise.push_back({zm, std::sqrt(c2) * zm * zm, sc.pts.size()});
+      z2.push_back(zm * zm);
+      sig.push_back(r.noise.back().sigma_z_mm);
+    }
+    const ProportionalFit cz = fit_proportional(z2, sig, "C_z fit");
+    r.cz_per_mm = {cz.k, std::max(cz.ci95(), 1.96 * cz.k / std::sqrt(2.0 * static_cast<double>(r.noise.front().samples)))};
+    r.noise_fit_rms_mm = cz.rms;
+    // Lateral noise (eq. 3.3): on a plane whose normal n leans in the camera's x or y, the residuals normal
+    // to it carry n_x σx and n_y σy beside n_z σz: r² ≈ (n_x z)² C_x² + (n_y z)² C_y² + (n_z σz)², linear in
+    // (C_x², C_y²). The grazing plate scans lean in x, the ramp scans in y.
+    Eigen::Matrix2d ata = Eigen::Matrix2d::Zero();
+    Eigen::Vector2d atb = Eigen::Vector2d::Zero();
+    double cc = 0.0;
+    std::size_t n = 0;
+    for (const auto& sc : oblique_scans) {
+      const double cos_yz = sc.n.z() / std::hypot(sc.n.y(), sc.n.z());
+      for (const auto& q : sc.pts) {
+        const double z = -q.z(), res = (q - sc.p0).dot(sc.n), sz = r.cz_per_mm.value * z * z / cos_yz;
+        const Eigen::Vector2d a(std::pow(sc.n.x() * z, 2), std::pow(sc.n.y() * z, 2));
+        const double c = res * res - std::pow(sc.n.z() * sz, 2);
+        ata += a * a.transpose();
+        atb += a * c;
+        cc += c * c;
+        ++n;
+      }
+    }
+    if (n < 1000 || std::abs(ata.determinant()) < 1e-12 * ata.squaredNorm())
+      throw DataError("C_x, C_y: too few oblique samples to separate the lateral noise");
+    const Eigen::Vector2d c2 = ata.ldlt().solve(atb);
+    const double ss = std::max(0.0, cc - 2.0 * c2.dot(atb) + c2.dot(ata * c2));
+    const Eigen::Matrix2d cov = ss / static_cast<double>(n - 2) * ata.inverse();
+    auto root = [&](int k) {
+      const double v = std::max(c2(k), 0.0), se2 = std::sqrt(std::max(cov(k, k), 0.0)), value = std::sqrt(v);
+      return Estimate{value, value > 0.0 ? 1.96 * se2 / (2.0 * value) : 1.96 * std::sqrt(se2)};
+    };
+    r.cx = root(0);
+    r.cy = root(1);
+    cx = r.cx.value;
+    cy = r.cy.value;
+  }
+  for (std::size_t k = 0; k < r.noise.size(); ++k)
+    ctx.log("noise scan " + std::to_string(k + 1) + ": depth " + std::to_string(r.noise[k].depth_mm) + " mm, sigma_z " +
+            std::to_string(r.noise[k].sigma_z_mm) + " mm from " + std::to_string(r.noise[k].samples) + " samples");
+  ctx.log("C_z " + std::to_string(r.cz_per_mm.value) + ", C_x " + std::to_string(r.cx.value) + " ± " + std::to_string(r.cx.ci95) +
+          ", C_y " + std::to_string(r.cy.value) + " ± " + std::to_string(r.cy.ci95));
   return r;
 }
 

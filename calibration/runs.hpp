@@ -55,6 +55,7 @@ struct NoiseAtStandoff {
 
 struct SensorResult {
   Estimate cz_per_mm;       // σz = C_z z²
+  Estimate cx, cy;          // σx = C_x z, σy = C_y z (eq. 3.3), from oblique planes (grazing plate, ramp)
   Estimate t_xz_rad, t_yz_rad;
   std::vector<NoiseAtStandoff> noise;
   double noise_fit_rms_mm = 0.0;  // of σ_k − C_z z_k²

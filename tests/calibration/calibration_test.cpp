@@ -144,12 +144,17 @@ TEST_F(CalibrationCell, SensorRunRecoversNoiseAndGrazingThresholds) {
   t.noise_cz_per_mm *= 1.12;     // the real sensor is noisier than its data sheet
   t.grazing_xz_rad = 66 * kDeg;  // and gives up earlier
   t.grazing_yz_rad = 57 * kDeg;
+  t.noise_cx = 1.5e-4;           // lateral noise unlike the data sheet's 1e-4
+  t.noise_cy = 0.6e-4;
   truth.sensor = t;
   std::int64_t job = 0;
   ASSERT_EQ(run("sensor", &job), dm::JobState::done) << journal->job(job).cause;
   std::cout << "C_z " << models.sensor.noise_cz_per_mm << " (truth " << t.noise_cz_per_mm << "), t_xz "
             << models.sensor.grazing_xz_rad / kDeg << "° (66°), t_yz " << models.sensor.grazing_yz_rad / kDeg << "° (57°)\n";
+  std::cout << "C_x " << models.sensor.noise_cx << " (1.5e-4), C_y " << models.sensor.noise_cy << " (0.6e-4)\n";
   EXPECT_NEAR(models.sensor.noise_cz_per_mm / t.noise_cz_per_mm, 1.0, 0.05);
+  EXPECT_NEAR(models.sensor.noise_cx / t.noise_cx, 1.0, 0.1);
+  EXPECT_NEAR(models.sensor.noise_cy / t.noise_cy, 1.0, 0.1);
   EXPECT_NEAR(models.sensor.grazing_yz_rad, t.grazing_yz_rad, 2 * kDeg);
   EXPECT_NEAR(models.sensor.grazing_xz_rad, t.grazing_xz_rad, 2 * kDeg);
   // The result file is versioned, names its cell, and loads back to the same values.
