@@ -23,6 +23,10 @@ struct DriverError : std::runtime_error {
 };
 const char* to_string(DriverError::Kind k);
 
+/// A move request every driver refuses the same way, before anything is sent: a non-finite target, or a
+/// velocity that is not a finite non-negative number (0: the configured profile velocity).
+void check_move_request(const std::string& axis, double target, double velocity);
+
 struct AxisState {
   double position = 0.0;  // mm or rad
   double velocity = 0.0;  // per second

@@ -254,9 +254,7 @@ void CanOpenAxis::home(std::chrono::milliseconds timeout) {
 
 void CanOpenAxis::begin_move(double target, double velocity) {
   refuse_if_faulted("move");
-  if (!std::isfinite(target)) throw DriverError(DriverError::Kind::refused, cfg_.name, "move", "target is not finite");
-  if (!std::isfinite(velocity) || velocity < 0.0)
-    throw DriverError(DriverError::Kind::refused, cfg_.name, "move", "velocity is not a finite non-negative number");
+  check_move_request(cfg_.name, target, velocity);
   const auto counts = static_cast<std::int32_t>(std::llround(target * cfg_.counts_per_unit));
   const double v = velocity > 0.0 ? velocity : cfg_.profile_velocity;
   sdo_write(kModes, 0, 1, 1);  // profile position

@@ -205,9 +205,7 @@ void ModbusAxis::home(std::chrono::milliseconds timeout) {
 
 void ModbusAxis::begin_move(double target, double velocity) {
   refuse_if_faulted("move");
-  if (!std::isfinite(target)) throw DriverError(DriverError::Kind::refused, cfg_.name, "move", "target is not finite");
-  if (!std::isfinite(velocity) || velocity < 0.0)
-    throw DriverError(DriverError::Kind::refused, cfg_.name, "move", "velocity is not a finite non-negative number");
+  check_move_request(cfg_.name, target, velocity);
   const auto counts = static_cast<std::int32_t>(std::llround(target * cfg_.counts_per_unit));
   const double v = velocity > 0.0 ? velocity : cfg_.profile_velocity;
   const auto vel = static_cast<std::int32_t>(std::llround(v * cfg_.counts_per_unit));
@@ -267,6 +265,12 @@ std::vector<std::string> Positioner::latch_estop(const std::string& why) {
 }
 
 void Positioner::reset_estop() { latched_ = false; }
+
+void check_move_request(const std::string& axis, double target, double velocity) {
+  if (!std::isfinite(target)) throw DriverError(DriverError::Kind::refused, axis, "move", "target is not finite");
+  if (!std::isfinite(velocity) || velocity < 0.0)
+    throw DriverError(DriverError::Kind::refused, axis, "move", "velocity is not a finite non-negative number");
+}
 
 void Positioner::check_target(const std::string& n, double t) const {
   if (latched_)

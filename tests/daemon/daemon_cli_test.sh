@@ -18,39 +18,23 @@ cleanup() {
   rm -rf "$W"
 }
 trap cleanup EXIT
-awk -v base="$PORT" '{ if (match($0, /port: [0-9]+/)) { p = substr($0, RSTART + 6, RLENGTH - 6); sub(/port: [0-9]+/, "port: " base + (p % 10) - 1) } print }' \
-  "$SRC/config/drivers/demo-sim.yaml" > "$W/drivers.yaml"
-write_config() {
-  cat > "$W/scancelld.yaml" <<YAML
-cell: $SRC/config/cells/turntable-lift-tilt.yaml
-drivers: $W/drivers.yaml
-sensor: $SRC/config/sensors/line-scan-thesis.yaml
-spec: $SRC/config/spec/thesis.yaml
-planner: $SRC/config/planner/default.yaml
-data_dir: $W/data
-lcm_url: "udpm://239.255.76.67:$LCM_PORT?ttl=0"
-control: {socket: $W/control.sock}
-scanner: {driver: sim}
-jobs: {max_rounds: 2, move_timeout_s: 20, scan_speed_mm_s: 400, home_timeout_s: 20$1}
-YAML
-}
-ctl() { "$BUILD/tools/scancellctl" --socket "$W/control.sock" "$@"; }
+. "$(dirname "$0")/sim_cell.sh"
+write_drivers
+JOBS="{max_rounds: 2, move_timeout_s: 20, scan_speed_mm_s: 400, home_timeout_s: 20"
 
 # 1. Bad configuration: refused at start, key path named, exit 4.
-write_config ", max_roundz: 3"
+write_config "{driver: sim}" "$JOBS, max_roundz: 3}"
 out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
 [ $rc = 4 ] || fail "bad config: exit $rc, want 4"
 echo "$out" | grep -q "jobs.max_roundz: unknown key" || fail "bad config message: $out"
-write_config ""
+write_config "{driver: sim}" "$JOBS}"
 sed -i 's|planner: .*|planner: /nonexistent/planner.yaml|' "$W/scancelld.yaml"
 out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
 [ $rc = 4 ] && echo "$out" | grep -q "planner: no such file" || fail "missing file: exit $rc: $out"
-write_config ""
+write_config "{driver: sim}" "$JOBS}"
 
 # 2. Start on simulated drives; watch LCM from another process.
-"$BUILD/tools/scancell-sim" modbus --tcp "$PORT" --drives 5 --max-velocity 4000000 --accel 40000000 --no-stdin > "$W/sim.log" 2>&1 &
-SIM_PID=$!
-for _ in $(seq 100); do grep -q "drive 4 on" "$W/sim.log" 2>/dev/null && break; sleep 0.05; done
+start_sim
 lcm-logger --lcm-url="udpm://239.255.76.67:$LCM_PORT?ttl=0" -q "$W/lcm.log" &
 LOGGER_PID=$!
 "$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" > "$W/daemon.log" 2>&1 &

@@ -23,26 +23,10 @@ cleanup() {
 }
 trap cleanup EXIT
 
-sed -e "s|port: 1550\([1-5]\)|port: $((PORT - 1))\1|" "$SRC/config/drivers/demo-sim.yaml" \
-  | awk -v base="$PORT" '{ if (match($0, /port: [0-9]+/)) { p = substr($0, RSTART + 6, RLENGTH - 6); sub(/port: [0-9]+/, "port: " base + (p % 10) - 1) } print }' \
-  > "$W/drivers.yaml"
-cat > "$W/scancelld.yaml" <<YAML
-cell: $SRC/config/cells/turntable-lift-tilt.yaml
-drivers: $W/drivers.yaml
-sensor: $SRC/config/sensors/line-scan-thesis.yaml
-spec: $SRC/config/spec/thesis.yaml
-planner: $SRC/config/planner/default.yaml
-data_dir: $W/data
-lcm_url: "udpm://239.255.76.67:$LCM_PORT?ttl=0"
-control: {socket: $W/control.sock}
-scanner: {driver: sim, seed: 3}
-jobs: {max_rounds: 3, move_timeout_s: 20, scan_speed_mm_s: 400, home_timeout_s: 20}
-YAML
-
-"$BUILD/tools/scancell-sim" modbus --tcp "$PORT" --drives 5 --max-velocity 4000000 --accel 40000000 --no-stdin > "$W/sim.log" 2>&1 &
-SIM_PID=$!
-for _ in $(seq 100); do grep -q "drive 4 on" "$W/sim.log" 2>/dev/null && break; sleep 0.05; done
-grep -q "drive 4 on" "$W/sim.log" || { echo "kill_loop: simulator did not start"; cat "$W/sim.log"; exit 1; }
+. "$SRC/tests/daemon/sim_cell.sh"
+write_drivers
+write_config "{driver: sim, seed: 3}" "{max_rounds: 3, move_timeout_s: 20, scan_speed_mm_s: 400, home_timeout_s: 20}"
+start_sim
 
 start_daemon() {
   rm -f "$W/control.sock"
@@ -51,7 +35,6 @@ start_daemon() {
   for _ in $(seq 400); do [ -S "$W/control.sock" ] && return 0; sleep 0.025; done
   echo "kill_loop: scancelld did not come up"; tail -5 "$W/daemon.log"; exit 1
 }
-ctl() { "$BUILD/tools/scancellctl" --socket "$W/control.sock" "$@"; }
 
 start_daemon
 ctl submit --mesh "$SRC/tests/data/cube50.off" --rough-vertices 400 > /dev/null

@@ -1,0 +1,34 @@
+# Shared by the process tests (sourced): the demo's driver config moved to five ports from $PORT, a daemon
+# config in $W, and the drive simulator. Needs BUILD, SRC, W, PORT, LCM_PORT.
+
+# write_drivers: config/drivers/demo-sim.yaml with its ports 15501-15505 moved to PORT ... PORT+4.
+write_drivers() {
+  awk -v base="$PORT" '{ if (match($0, /port: [0-9]+/)) { p = substr($0, RSTART + 6, RLENGTH - 6); sub(/port: [0-9]+/, "port: " base + (p % 10) - 1) } print }' \
+    "$SRC/config/drivers/demo-sim.yaml" > "$W/drivers.yaml"
+}
+
+# write_config SCANNER JOBS: $W/scancelld.yaml with these flow mappings for `scanner` and `jobs`.
+write_config() {
+  cat > "$W/scancelld.yaml" <<YAML
+cell: $SRC/config/cells/turntable-lift-tilt.yaml
+drivers: $W/drivers.yaml
+sensor: $SRC/config/sensors/line-scan-thesis.yaml
+spec: $SRC/config/spec/thesis.yaml
+planner: $SRC/config/planner/default.yaml
+data_dir: $W/data
+lcm_url: "udpm://239.255.76.67:$LCM_PORT?ttl=0"
+control: {socket: $W/control.sock}
+scanner: $1
+jobs: $2
+YAML
+}
+
+# start_sim: the five drives in the background (SIM_PID), returning once the last one serves.
+start_sim() {
+  "$BUILD/tools/scancell-sim" modbus --tcp "$PORT" --drives 5 --max-velocity 4000000 --accel 40000000 --no-stdin > "$W/sim.log" 2>&1 &
+  SIM_PID=$!
+  for _ in $(seq 100); do grep -q "drive 4 on" "$W/sim.log" 2>/dev/null && return 0; sleep 0.05; done
+  echo "the drive simulator did not start:"; cat "$W/sim.log"; exit 1
+}
+
+ctl() { "$BUILD/tools/scancellctl" --socket "$W/control.sock" "$@"; }
