@@ -77,10 +77,11 @@ struct SimCell : ::testing::Test {
   std::optional<SimTruth> truth;
   bool register_views = true;
   int max_rounds = 4;
+  double scan_speed = 400.0;
 
   JobRunner runner() {
     JobSettings s;
-    s.scan_speed_mm_s = 400.0;
+    s.scan_speed_mm_s = scan_speed;
     s.register_views = register_views;
     s.max_rounds = max_rounds;
     s.jobs_dir = dir / "data" / "jobs";
@@ -252,6 +253,9 @@ TEST_F(SimCell, FromABoundingBoxRoughScanThenPlanAndMeasure) {
   // Nothing known but the object's size: the rough scan's exploration views are fused into a closed rough
   // model standing on the table (the underside hypothetical), then the usual plan-execute-replan loop.
   const std::string cube = write_cube(dir);
+  // The rough scan's long sweeps at half the speed: polled position compare on a loaded machine misses
+  // profiles at 400 mm/s, and a fused model full of gaps is not what this test is about.
+  scan_speed = 200.0;
   JobRequest r;
   r.bbox_mm = Eigen::Vector3d(60, 60, 60);
   r.truth = cube;
