@@ -99,80 +99,82 @@ FusedModel TsdfVolume::extract() const {
     if (i <= 0 || j <= 0 || k <= 0 || i >= nx_ - 1 || j >= ny_ - 1 || k >= nz_ - 1 || below_floor(k)) return 1.0f;
     return field(at(i, j, k));
   };
-  // A corner that is material only by the conservative guess makes its cell's vertex hypothetical.
+  // A corner that is material only by the conservative guess makes the vertices on its edges hypothetical.
   auto guessed = [&](long i, long j, long k) {
     if (i <= 0 || j <= 0 || k <= 0 || i >= nx_ - 1 || j >= ny_ - 1 || k >= nz_ - 1 || below_floor(k)) return false;
     const std::size_t v = at(i, j, k);
     return weight_[v] == 0.0f && !carved_[v] && behind_[v] >= occluding_views_;
   };
-  // One vertex per cell (min corner i, j, k) the surface crosses.
-  std::unordered_map<std::size_t, std::uint32_t> vertex_of;
-  const std::array<std::array<int, 3>, 8> corner = {{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}, {0, 0, 1}, {1, 0, 1}, {0, 1, 1}, {1, 1, 1}}};
-  const std::array<std::array<int, 2>, 12> edges = {{{0, 1}, {2, 3}, {4, 5}, {6, 7}, {0, 2}, {1, 3}, {4, 6}, {5, 7}, {0, 4}, {1, 5}, {2, 6}, {3, 7}}};
-  auto cell_vertex = [&](long i, long j, long k) -> std::uint32_t {
-    const std::size_t key = at(i, j, k);
+  // Marching tetrahedra on the Kuhn triangulation of the grid (every cube cut into the six tetrahedra about
+  // its main diagonal; neighbouring cubes cut their shared face along the same diagonal). Unlike surface nets
+  // or plain marching cubes it has no ambiguous case, so the surface is a closed 2-manifold wherever the
+  // volume is closed: the rough-model decimator takes every face. One vertex per grid edge (axis, face or
+  // body diagonal) the surface crosses, shared by every tetrahedron on that edge.
+  std::unordered_map<std::uint64_t, std::uint32_t> vertex_of;
+  struct Corner {
+    long i, j, k;
+    float f;
+  };
+  auto edge_vertex = [&](const Corner& a, const Corner& b) -> std::uint32_t {
+    const std::uint64_t ia = at(a.i, a.j, a.k), ib = at(b.i, b.j, b.k);
+    const std::uint64_t key = std::min(ia, ib) << 32 | std::max(ia, ib);
     const auto it = vertex_of.find(key);
     if (it != vertex_of.end()) return it->second;
-    std::array<float, 8> f;
-    std::array<bool, 8> g;
-    bool guess = false;
-    for (int n = 0; n < 8; ++n) {
-      const auto& cn = corner[static_cast<std::size_t>(n)];
-      f[static_cast<std::size_t>(n)] = value(i + cn[0], j + cn[1], k + cn[2]);
-      g[static_cast<std::size_t>(n)] = guessed(i + cn[0], j + cn[1], k + cn[2]);
-    }
-    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-    int crossings = 0;
-    for (const auto& e : edges) {
-      const float a = f[static_cast<std::size_t>(e[0])], b = f[static_cast<std::size_t>(e[1])];
-      if ((a < 0.0f) == (b < 0.0f)) continue;
-      // A crossing against guessed material is a guess too.
-      guess = guess || g[static_cast<std::size_t>(e[0])] || g[static_cast<std::size_t>(e[1])];
-      const double t = a / (a - b);
-      const auto& ca = corner[static_cast<std::size_t>(e[0])];
-      const auto& cb = corner[static_cast<std::size_t>(e[1])];
-      sum += Eigen::Vector3d(ca[0] + t * (cb[0] - ca[0]), ca[1] + t * (cb[1] - ca[1]), ca[2] + t * (cb[2] - ca[2]));
-      ++crossings;
-    }
-    const Eigen::Vector3d local = crossings ? Eigen::Vector3d(sum / crossings) : Eigen::Vector3d(0.5, 0.5, 0.5);
+    // Kept off the corners, so no two vertices coincide and no triangle is degenerate.
+    const double t = std::clamp(static_cast<double>(a.f) / static_cast<double>(a.f - b.f), 1e-3, 1.0 - 1e-3);
     const auto id = static_cast<std::uint32_t>(out.mesh.vertices.size());
-    out.mesh.vertices.push_back(centre(i, j, k) + voxel_ * local);
-    out.hypothetical.push_back(guess);
+    out.mesh.vertices.push_back((1.0 - t) * centre(a.i, a.j, a.k) + t * centre(b.i, b.j, b.k));
+    out.hypothetical.push_back(guessed(a.i, a.j, a.k) || guessed(b.i, b.j, b.k));
     vertex_of.emplace(key, id);
     return id;
   };
-  // One quad per grid edge whose ends differ in sign, joining the four cells around the edge; wound so that
-  // the normal points from material (negative) to free space (positive).
+  auto position = [&](const Corner& c) { return centre(c.i, c.j, c.k); };
+  // Wound so the normal points from material (negative) to free space (positive). The winding is decided on
+  // the edge midpoints, where the triangle is never degenerate; the interpolated vertices lie on the same
+  // edges, on the same side of every corner, so the orientation carries over.
+  auto emit = [&](const std::array<const Corner*, 3>& e0, const std::array<const Corner*, 3>& e1, const Eigen::Vector3d& outward) {
+    std::array<Eigen::Vector3d, 3> mid;
+    for (int n = 0; n < 3; ++n) mid[static_cast<std::size_t>(n)] = 0.5 * (position(*e0[static_cast<std::size_t>(n)]) + position(*e1[static_cast<std::size_t>(n)]));
+    std::array<std::uint32_t, 3> t;
+    for (int n = 0; n < 3; ++n) t[static_cast<std::size_t>(n)] = edge_vertex(*e0[static_cast<std::size_t>(n)], *e1[static_cast<std::size_t>(n)]);
+    if ((mid[1] - mid[0]).cross(mid[2] - mid[0]).dot(outward) < 0.0) std::swap(t[1], t[2]);
+    out.mesh.triangles.push_back({t[0], t[1], t[2]});
+  };
+  // Corner n of a cube at offset (n & 1, n >> 1 & 1, n >> 2 & 1); the six tetrahedra 0 → 7 by axis order.
+  static constexpr std::array<std::array<int, 4>, 6> kuhn = {{{0, 1, 3, 7}, {0, 1, 5, 7}, {0, 2, 3, 7}, {0, 2, 6, 7}, {0, 4, 5, 7}, {0, 4, 6, 7}}};
   for (long k = 0; k + 1 < nz_; ++k)
     for (long j = 0; j + 1 < ny_; ++j)
       for (long i = 0; i + 1 < nx_; ++i) {
-        const float f0 = value(i, j, k);
-        for (int axis = 0; axis < 3; ++axis) {
-          const long di = axis == 0, dj = axis == 1, dk = axis == 2;
-          if (!inside(i + di, j + dj, k + dk)) continue;
-          const float f1 = value(i + di, j + dj, k + dk);
-          if ((f0 < 0.0f) == (f1 < 0.0f)) continue;
-          // The four cells around edge (i,j,k)-(i+di,j+dj,k+dk): offsets in the two other axes.
-          const int a1 = (axis + 1) % 3, a2 = (axis + 2) % 3;
-          std::array<long, 3> base = {i, j, k};
-          std::array<std::uint32_t, 4> q{};
-          bool ok = true;
-          const std::array<std::array<int, 2>, 4> around = {{{0, 0}, {-1, 0}, {-1, -1}, {0, -1}}};
-          for (int n = 0; n < 4 && ok; ++n) {
-            std::array<long, 3> c = base;
-            c[static_cast<std::size_t>(a1)] += around[static_cast<std::size_t>(n)][0];
-            c[static_cast<std::size_t>(a2)] += around[static_cast<std::size_t>(n)][1];
-            if (c[0] < 0 || c[1] < 0 || c[2] < 0 || c[0] + 1 >= nx_ || c[1] + 1 >= ny_ || c[2] + 1 >= nz_) ok = false;
-            else q[static_cast<std::size_t>(n)] = cell_vertex(c[0], c[1], c[2]);
+        std::array<Corner, 8> c;
+        int material = 0;
+        for (int n = 0; n < 8; ++n) {
+          Corner& cn = c[static_cast<std::size_t>(n)];
+          cn = {i + (n & 1), j + (n >> 1 & 1), k + (n >> 2 & 1), 0.0f};
+          cn.f = value(cn.i, cn.j, cn.k);
+          material += cn.f < 0.0f;
+        }
+        if (material == 0 || material == 8) continue;
+        for (const auto& tet : kuhn) {
+          std::array<const Corner*, 4> in{}, outside{};
+          int ni = 0, no = 0;
+          for (int n : tet) {
+            const Corner* cn = &c[static_cast<std::size_t>(n)];
+            if (cn->f < 0.0f) in[static_cast<std::size_t>(ni++)] = cn;
+            else outside[static_cast<std::size_t>(no++)] = cn;
           }
-          if (!ok) continue;
-          // (a1, a2, axis) is right-handed: going round a1 → a2 gives a normal along +axis.
-          if (f0 < 0.0f) {  // material at the low end: outward is +axis
-            out.mesh.triangles.push_back({q[0], q[1], q[2]});
-            out.mesh.triangles.push_back({q[0], q[2], q[3]});
-          } else {
-            out.mesh.triangles.push_back({q[0], q[3], q[2]});
-            out.mesh.triangles.push_back({q[0], q[2], q[1]});
+          if (ni == 0 || no == 0) continue;
+          Eigen::Vector3d mi = Eigen::Vector3d::Zero(), mo = Eigen::Vector3d::Zero();
+          for (int n = 0; n < ni; ++n) mi += position(*in[static_cast<std::size_t>(n)]) / ni;
+          for (int n = 0; n < no; ++n) mo += position(*outside[static_cast<std::size_t>(n)]) / no;
+          const Eigen::Vector3d outward = mo - mi;
+          if (ni == 1) {
+            emit({in[0], in[0], in[0]}, {outside[0], outside[1], outside[2]}, outward);
+          } else if (no == 1) {
+            emit({in[0], in[1], in[2]}, {outside[0], outside[0], outside[0]}, outward);
+          } else {  // two and two: the quad a-c, a-d, b-d, b-c, as two triangles
+            const Corner *a = in[0], *b = in[1], *cc = outside[0], *d = outside[1];
+            emit({a, a, b}, {cc, d, d}, outward);
+            emit({a, b, b}, {cc, d, cc}, outward);
           }
         }
       }

@@ -2,8 +2,8 @@
 // The rough model from a rough scan (thesis 1.2.2, 3.1, 3.5.2): range images fused into a truncated signed
 // distance volume (Curless-Levoy style: a weighted running average of the distance along each laser ray
 // within ±τ of its sample; voxels a ray passed through on its way are carved empty), and a closed surface
-// extracted from it with surface nets (one vertex per cell the surface crosses, at the mean of its edge
-// crossings; one quad per crossed grid edge).
+// extracted from it with marching tetrahedra (each grid cube cut into six tetrahedra about its main diagonal;
+// no ambiguous case, so the surface is an oriented closed 2-manifold the decimator takes whole).
 //
 // What no ray has seen but lies behind a measured surface (the underside on the plate, deep recesses, the
 // interior) counts as material: the surface closes conservatively around it, and every vertex on such a
@@ -52,7 +52,7 @@ class TsdfVolume {
   }
   bool inside(long i, long j, long k) const { return i >= 0 && j >= 0 && k >= 0 && i < nx_ && j < ny_ && k < nz_; }
   Eigen::Vector3d centre(long i, long j, long k) const;
-  /// The field surface nets contour: the TSDF where observed, +τ where carved, -τ where unseen.
+  /// The field the extraction contours: the TSDF where observed, +τ where carved, -τ where unseen.
   float field(std::size_t v) const;
 
   Eigen::Vector3d origin_;  // centre of voxel (0, 0, 0)
