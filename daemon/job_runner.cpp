@@ -244,15 +244,33 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
     result["unmeasured_file"] = path.string();
   }
   // Simulation: the same coverage of the rough model from where the samples really are (the simulator's
-  // ground-truth hit points): how far registration (or its absence) lets the measured figure be trusted.
+  // ground-truth hit points), counting only samples the daemon stored within 3 × the precision spec of
+  // where they really are: data off by more is not a measurement to the spec, wherever it landed. How far
+  // registration (or its absence) lets the measured figure be trusted.
   if (state != JobState::aborted && !images.empty() && j.rough) {
     sp::MeasuredCoverage truth(*j.rough, j.spec, settings_.coverage);
+    const double tolerance = 3.0 * j.spec.precision_mm;
+    double ss = 0.0;
+    std::size_t n = 0, off = 0;
     for (auto img : images) {
       for (auto& smp : img.samples)
-        if (smp.valid()) smp.object_mm = smp.true_object_mm;
+        if (smp.valid()) {
+          const double e = (smp.object_mm - smp.true_object_mm).cast<double>().norm();
+          ss += e * e;
+          ++n;
+          smp.object_mm = smp.true_object_mm;
+          if (e > tolerance) {
+            smp.triangle = sp::kNoHit;
+            ++off;
+          }
+        }
       truth.add(img);
     }
     result["verified_coverage"] = truth.coverage();
+    // How far the stored samples are from the surface points the laser really hit (pose error left after
+    // registration, plus range noise), and the share stored farther off than the tolerance.
+    result["sample_error_rms_mm"] = n ? std::sqrt(ss / static_cast<double>(n)) : 0.0;
+    result["samples_off_spec"] = n ? static_cast<double>(off) / static_cast<double>(n) : 0.0;
   }
   // Simulation: verified measurability of the stored scans against the object actually on the table.
   if (state != JobState::aborted && !images.empty() && !j.truth_object.vertices.empty()) {
@@ -338,7 +356,12 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
                           " rows, the journalled plan " + std::to_string(info0.at("rows").get<std::size_t>()) +
                           " (mesh file or planner changed since the job was planned)");
     j.coverage = std::make_unique<sp::MeasuredCoverage>(*j.rough, j.spec, settings_.coverage);
-    if (settings_.register_views) j.cloud = std::make_unique<sp::ModelCloud>(sp::ModelCloud::from_mesh(j.rough->mesh(), 1.0));
+    // Views register to the object's mesh as given, not to the planner's decimated rows: every coarsening is
+    // a bias of registration along the views' rays (what is left of it the PN patches take out). A fused
+    // rough model is the exception: at full resolution it is a voxel staircase whose face normals scatter by
+    // tens of degrees, so its decimation (the rows' mesh, flat where the object is) is the better target.
+    if (settings_.register_views)
+      j.cloud = std::make_unique<sp::ModelCloud>(sp::ModelCloud::from_mesh(j.request.bbox_mm ? j.rough->mesh() : j.object, 1.0));
     std::vector<Eigen::Vector3d> cloud_points, cloud_normals;
     for (auto plan : plans)
       for (const auto& s : journal_.scans(plan)) {
@@ -572,14 +595,13 @@ void JobRunner::execute_view(Job& j, std::int64_t plan, const ViewRecord& v, con
   // good enough to trust the samples where it put them).
   std::string note, registration;
   if (j.cloud) {
-    std::vector<Eigen::Vector3d> pts;
-    for (const auto& s : img.samples)
-      if (s.valid()) pts.push_back(s.object_mm.cast<double>());
-    const sp::IcpResult r = sp::register_points(pts, *j.cloud, settings_.icp);
+    // Rotations about each profile's laser origin: a camera orientation error shears a line scan.
+    const sp::IcpResult r = sp::register_scan(sp::scan_samples(img), *j.cloud, settings_.icp);
     if (r.ok) {
       sp::apply_correction(img, r.correction);
-      registration = ", registered (moved " + fmt(r.correction.translation().norm(), 3) + " mm, " +
-                     fmt(Eigen::AngleAxisd(r.correction.linear()).angle() * 180.0 / M_PI, 3) + "°, residual " + fmt(r.rms_mm, 3) + " mm" +
+      registration = ", registered (samples moved " + fmt(r.moved_mean_mm, 3) + " mm on average, " + fmt(r.moved_max_mm, 3) +
+                     " mm at most, turned " + fmt(Eigen::AngleAxisd(r.correction.linear()).angle() * 180.0 / M_PI, 3) + "°, residual " +
+                     fmt(r.rms_mm, 3) + " mm" +
                      (r.free_directions ? ", " + std::to_string(r.free_directions) + " directions left as positioned" : "") + ")";
     } else {
       note = "registration failed: " + r.why;

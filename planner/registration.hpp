@@ -41,9 +41,9 @@ struct IcpOptions {
   double max_distance_mm = 5.0;     // pairs farther apart are not correspondences (the pose error bound)
   double max_normal_angle_rad = 0.5;
   int max_iterations = 100;
-  double converged_mm = 1e-4;       // stop when the update moves no sample more than this
+  double converged_mm = 1e-3;       // stop when the update moves no sample more than this
   double min_overlap = 0.3;         // share of the samples that must find a partner
-  double min_conditioning = 1e-2;   // smallest / largest eigenvalue of the scaled normal matrix
+  double min_conditioning = 1e-2;   // least share of a motion's sample displacement across the surface (0..1; 0: a slide)
   double lever_mm = 100.0;          // rotations are scaled by this to compare them with translations
   /// false: an ill-conditioned view is refused. true: it is registered in the directions its shape fixes and
   /// left where the positioner put it in the others (a face-on plane: only its distance and tilt), and the
@@ -56,6 +56,7 @@ struct IcpResult {
   std::string why;                  // when not ok: too little overlap, ill-conditioned, did not converge
   Eigen::Isometry3d correction = Eigen::Isometry3d::Identity();  // apply to the view's samples (object frame)
   double rms_mm = 0.0;              // point-to-plane residual after registration
+  double moved_mean_mm = 0.0, moved_max_mm = 0.0;  // how far the correction moves the samples
   double overlap = 0.0;
   double conditioning = 0.0;
   int iterations = 0;
@@ -68,10 +69,32 @@ struct IcpResult {
 void image_points_normals(const RangeImage& image, int stride, std::vector<Eigen::Vector3d>& points,
                           std::vector<Eigen::Vector3d>& normals);
 
-/// Applies a registration correction to an image: samples and pose move together.
+/// An image's valid samples as registration takes them, in sample order (object frame, mm): each sample's
+/// pivot — a point on the boresight of its profile for a line scan (a camera orientation error turns each
+/// profile about its own laser, not the image about one point), of the camera for a random-access sensor,
+/// at the image's mean depth — and its surface
+/// normal from its image neighbours, turned towards the laser (zero where a neighbour is missing or across
+/// a depth step).
+struct ScanSamples {
+  std::vector<Eigen::Vector3d> points, pivots, normals;
+};
+ScanSamples scan_samples(const RangeImage& image);
+
+/// Applies a registration correction (see register_points) to an image, rotating each sample about its own
+/// pivot (scan_samples); the pose moves as the mid-sweep profile does. camera_mm is re-expressed
+/// in the new pose, as acquisition does.
 void apply_correction(RangeImage& image, const Eigen::Isometry3d& correction);
 
-/// Registers `points` (object frame as the positioner believed) to `model`.
-IcpResult register_points(const std::vector<Eigen::Vector3d>& points, const ModelCloud& model, const IcpOptions& options = {});
+/// Registers `points` (object frame as the positioner believed) to `model`. The correction (W, δ) moves a
+/// point p measured from pivot o to W (p − o) + o + δ. Without pivots (o = 0) that is the rigid motion W p + δ.
+/// With a line scan's profile pivots it is the motion a camera orientation error really causes: the sweep
+/// axis carries every profile along the same line, each turned by W about its own laser origin, so the image
+/// is sheared, not rigidly turned (0.5° over a 110 mm sweep: ±0.5 mm at its ends).
+/// Samples with known normals pair only with model points whose normal is within max_normal_angle_rad: a
+/// face's samples near its edge are not the neighbouring face's (those pairs would invent a constraint along
+/// the face, and a plane would not be flagged).
+IcpResult register_points(const std::vector<Eigen::Vector3d>& points, const ModelCloud& model, const IcpOptions& options = {},
+                          const std::vector<Eigen::Vector3d>& pivots = {}, const std::vector<Eigen::Vector3d>& normals = {});
+IcpResult register_scan(const ScanSamples& samples, const ModelCloud& model, const IcpOptions& options = {});
 
 }  // namespace scancell::planner

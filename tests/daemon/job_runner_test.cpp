@@ -15,6 +15,8 @@
 #include "planner/config.hpp"
 #include "planner/errors.hpp"
 #include "planner/mesh.hpp"
+#include "planner/rough_model.hpp"
+#include "planner/rough_scan.hpp"
 #include "planner/virtual_scanner.hpp"
 
 namespace scancell::daemon {
@@ -173,6 +175,9 @@ TEST_F(SimCell, DriveFaultFaultsTheJobAndResumeFinishesWithoutRepeatingAView) {
   const JobState end = r.run(job, stop);
   EXPECT_TRUE(end == JobState::done || end == JobState::stalled) << journal->job(job).cause;
   const auto result = nlohmann::json::parse(journal->job(job).result_json);
+  if (::getenv("SCANCELL_TEST_VERBOSE"))
+    for (const auto& e : journal->events(job)) std::cerr << e << "\n";
+  if (::getenv("TMPDIAG")) for (auto p : journal->plans(job)) for (const auto& sc : journal->scans(p)) { const sp::RangeImage img = sp::range_image_from_ply(journal->read_scan(sc), sc.file); Eigen::AlignedBox3f b; for (auto& x : img.samples) if (x.valid()) b.extend(x.object_mm); std::cerr << "plan " << p << " view " << sc.view << " " << sc.note << " box " << b.min().transpose() << " / " << b.max().transpose() << " cam " << img.pose.camera_to_object.translation().transpose() << "\n"; }
   EXPECT_LT(result["open_area_mm2"].get<double>(), 0.01 * result["rough_area_mm2"].get<double>());
   EXPECT_TRUE(journal->check().empty());
   const auto ev = journal->events(job);
@@ -201,52 +206,65 @@ TEST_F(SimCell, PauseStopsAtASafePointAndAbortEndsTheJob) {
 }
 
 TEST_F(SimCell, RegistrationPutsSamplesWhereTheyReallyAreUnderPoseError) {
-  // The positioner misses by σ_p 0.5 mm, σ_a 0.5° per move (issue 9's figure). Without registration the
-  // samples sit where the cell model put the camera; with it, where the surface really is (the simulator
-  // knows each sample's true hit point). One plan round each, the same views and the same error draws.
+  // The positioner misses by σ_p 0.5 mm, σ_a 0.5° per move (issue 9's figure). The job is given a coarse
+  // mesh of the object (1500 vertices, what a rough scan or an old model would be); the truth is the fine
+  // one. Without registration the samples sit where the cell model put the camera; with it, where the
+  // surface really is (the simulator knows each sample's true hit point). One plan round each.
   SimTruth t;
   t.pose_error = {0.5, 0.5 * M_PI / 180.0, 0.5 * M_PI / 180.0};
   t.seed = 5;
   truth = t;
   max_rounds = 1;
+  sp::TriangleMesh fine = sp::load_mesh(src("tests/data/mushroom.off"));
+  sp::apply_scale(fine, sp::fit_scale(fine, 100.0));
+  sp::write_off(fine, (dir / "fine.off").string());
+  sp::write_off(sp::decimate(fine, 1500), (dir / "coarse.off").string());
+  auto submit_coarse = [&] {
+    JobRequest r;
+    r.mesh = (dir / "coarse.off").string();
+    r.truth = (dir / "fine.off").string();
+    // Rows of ~10 mm²: a 600-row model's 100 mm² rows sit at the 90 % fill threshold and flip, run to run,
+    // by a percent of the area each.
+    r.rough_vertices = 2000;
+    validate_request(r);
+    return journal->create_job(r.mesh, r.to_json().dump());
+  };
   std::size_t refused = 0, views = 0;
-  auto error_rms = [&](std::int64_t job) {
-    double ss = 0.0;
-    std::size_t n = 0;
+  auto count_refused = [&](std::int64_t job) {
     for (auto p : journal->plans(job))
       for (const auto& sc : journal->scans(p)) {
         ++views;
         if (!sc.note.empty()) {  // a refused registration: stored, flagged, not counted
           ++refused;
           std::cout << "view " << sc.view << ": " << sc.note << "\n";
-          continue;
         }
-        const sp::RangeImage img = sp::range_image_from_ply(journal->read_scan(sc), sc.file);
-        for (std::size_t k = 0; k < img.samples.size(); k += 17)
-          if (img.samples[k].valid()) {
-            ss += (img.samples[k].object_mm - img.samples[k].true_object_mm).cast<double>().squaredNorm();
-            ++n;
-          }
       }
-    return std::sqrt(ss / static_cast<double>(n));
   };
   std::atomic<int> stop{0};
-  const auto job = submit(src("tests/data/mushroom.off"), 100.0);
+  const auto job = submit_coarse();
   auto r = runner();
   r.run(job, stop);
+  count_refused(job);
   register_views = false;
-  const auto job2 = submit(src("tests/data/mushroom.off"), 100.0);
+  const auto job2 = submit_coarse();
   auto r2 = runner();
   r2.run(job2, stop);
-  const double with = error_rms(job);
-  EXPECT_LE(refused, views / 5) << refused << " of " << views << " registrations refused";
-  const double without = error_rms(job2);
   const auto rw = nlohmann::json::parse(journal->job(job).result_json), ro = nlohmann::json::parse(journal->job(job2).result_json);
+  const double with = rw["sample_error_rms_mm"], without = ro["sample_error_rms_mm"];
+  const double m_with = rw["measured_coverage"], v_with = rw["verified_coverage"];
+  const double m_without = ro["measured_coverage"], v_without = ro["verified_coverage"];
   std::cout << "sample position error RMS: registered " << with << " mm, unregistered " << without << " mm; coverage measured/verified "
-            << rw["measured_coverage"] << "/" << rw["verified_coverage"] << " vs " << ro["measured_coverage"] << "/" << ro["verified_coverage"] << "\n";
-  EXPECT_GT(without, 1.0);      // the pose error is there
-  EXPECT_LT(with, 0.3);         // and registration takes it out (the rest: range noise, rough-model bias)
-  EXPECT_LT(with, 0.25 * without);
+            << m_with << "/" << v_with << " (m_v " << rw["verified_mv"] << ") vs " << m_without << "/" << v_without << " (m_v "
+            << ro["verified_mv"] << "); samples off spec " << rw["samples_off_spec"] << " vs " << ro["samples_off_spec"] << "\n";
+  EXPECT_LE(refused, views / 5) << refused << " of " << views << " registrations refused";
+  EXPECT_GT(without, 1.0);  // the pose error is there
+  EXPECT_LT(with, 0.1);     // and registration takes it out: what is left is range noise and the coarse mesh's bias
+  // What the daemon measured (its samples where it stored them) is what the truth positions measure, counting
+  // only samples stored within 3 × the precision spec of where they really are.
+  EXPECT_NEAR(m_with, v_with, 0.01);
+  // Unregistered, the daemon believes much the same coverage, but hardly any of that data is where it says.
+  EXPECT_GT(m_without, 0.5);
+  EXPECT_LT(v_without, 0.1);
 }
 
 TEST_F(SimCell, FromABoundingBoxRoughScanThenPlanAndMeasure) {
@@ -278,6 +296,8 @@ TEST_F(SimCell, FromABoundingBoxRoughScanThenPlanAndMeasure) {
   }
   EXPECT_LT(worst, 2.5);
   const auto result = nlohmann::json::parse(journal->job(job).result_json);
+  if (::getenv("SCANCELL_TEST_VERBOSE"))
+    for (const auto& e : journal->events(job)) std::cerr << e << "\n";
   std::cout << "bbox job: rough model " << rough.vertices.size() << " vertices (worst " << worst << " mm from the cube), " << result["views"]
             << " views, measured " << result["measured_coverage"] << ", verified m_v " << result["verified_mv"] << "\n";
   EXPECT_NEAR(result["verified_mv"].get<double>(), 5.0 / 6.0, 0.06);
