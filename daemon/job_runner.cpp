@@ -221,7 +221,7 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
     double open_area = 0.0;
     std::size_t open = 0;
     for (auto r : rows)
-      if (!impossible[r]) {
+      if (!impossible[r] && (j.rough->hypothetical.empty() || !j.rough->hypothetical[r])) {
         ++open;
         open_area += j.rough->area_mm2[r];
       }
@@ -229,8 +229,21 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
     result["unmeasured_rows"] = rows.size();
     result["unmeasured_area_mm2"] = area;
     result["unmeasurable_rows"] = j.unmeasurable.size();  // no candidate view of this cell measures them
-    result["open_rows"] = open;                          // measurable by the plan's estimate, not measured
+    result["open_rows"] = open;                          // measurable by the plan's estimate, not measured, seen surface
     result["open_area_mm2"] = open_area;
+    if (!j.rough->hypothetical.empty()) {
+      std::size_t h = 0, h_open = 0;
+      double h_open_area = 0.0;
+      for (std::size_t r = 0; r < j.rough->size(); ++r) h += j.rough->hypothetical[r];
+      for (auto r : rows)
+        if (j.rough->hypothetical[r]) {
+          ++h_open;
+          h_open_area += j.rough->area_mm2[r];
+        }
+      result["hypothetical_rows"] = h;                   // the rough scan's guesses (unseen, closed conservatively)
+      result["hypothetical_unmeasured_rows"] = h_open;   // of those, not measured (incl. unmeasurable)
+      result["hypothetical_unmeasured_area_mm2"] = h_open_area;
+    }
     // The unmeasured regions as points (object frame) for a viewer.
     std::filesystem::create_directories(settings_.jobs_dir / std::to_string(j.id));
     const auto path = settings_.jobs_dir / std::to_string(j.id) / "unmeasured.xyz";
@@ -418,11 +431,18 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
       const auto unmeasured = j.coverage->unmeasured_rows();
       std::vector<std::uint8_t> impossible(j.rough->size(), 0);
       for (auto r : j.unmeasurable) impossible[r] = 1;
-      std::size_t open = 0;
-      double open_area = 0.0, impossible_area = 0.0;
+      std::size_t open = 0, guessed = 0;
+      double open_area = 0.0, impossible_area = 0.0, guessed_area = 0.0;
       for (auto r : unmeasured) {
         if (impossible[r]) {
           impossible_area += j.rough->area_mm2[r];
+          continue;
+        }
+        // A hypothetical row (the rough scan never saw that surface) that views aimed at and did not measure
+        // is most likely not surface at all: the real one lies deeper, and the views measured it instead.
+        if (!j.rough->hypothetical.empty() && j.rough->hypothetical[r]) {
+          ++guessed;
+          guessed_area += j.rough->area_mm2[r];
           continue;
         }
         ++open;
@@ -431,9 +451,12 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
       const double total = j.rough->total_area_mm2;
       const std::string summary = "measured " + fmt(j.progress.measured) + " of the rough model; " + std::to_string(open) +
                                   " measurable rows left (" + fmt(open_area, 1) + " mm2), " +
-                                  fmt(impossible_area, 1) + " mm2 no view in this cell can measure";
+                                  fmt(impossible_area, 1) + " mm2 no view in this cell can measure" +
+                                  (guessed ? ", " + std::to_string(guessed) + " hypothetical rows unconfirmed (" + fmt(guessed_area, 1) + " mm2)" : "");
       journal_.event(id, summary);
-      if (open == 0) {
+      // Hypothetical rows are chased for one replanning round (views aimed there explore what the rough scan
+      // missed); after that, only measurable rows of seen surface keep the job open.
+      if (open == 0 && (guessed == 0 || j.round >= 1)) {
         finish(j, JobState::done, "spec met: " + summary);
         return JobState::done;
       }
@@ -560,11 +583,18 @@ void JobRunner::rough_scan(Job& j, const std::atomic<int>& stop) {
     std::size_t guessed = 0;
     for (auto h : fused.hypothetical) guessed += h;
     std::filesystem::create_directories(dir);
+    // The flags first: rough.off's existence says the rough scan is complete.
+    sp::write_flagged_vertices(fused.mesh, fused.hypothetical, (dir / "rough.hypothetical.xyz").string());
     sp::write_off(fused.mesh, rough_file.string());
     journal_.event(j.id, "rough model: " + std::to_string(fused.mesh.vertices.size()) + " vertices, " + std::to_string(guessed) +
                              " hypothetical (unseen, closed conservatively), voxel " + fmt(volume.voxel_mm(), 2) + " mm -> " + rough_file.string());
   }
   j.object = sp::load_mesh(rough_file);
+  // Which rows of the rough model are guesses (unseen space closed conservatively): the planner plans them
+  // like any other, the verdict treats them apart.
+  const auto flags = dir / "rough.hypothetical.xyz";
+  if (std::filesystem::exists(flags)) j.rough_options.vertex_hypothetical = sp::read_flagged_vertices(j.object, flags.string());
+  else journal_.event(j.id, "rough model: no " + flags.string() + " (a job from before the flags were kept): every row counts as seen");
 }
 
 void JobRunner::execute_view(Job& j, std::int64_t plan, const ViewRecord& v, const std::atomic<int>& stop) {

@@ -99,9 +99,11 @@ FusedModel TsdfVolume::extract() const {
     if (i <= 0 || j <= 0 || k <= 0 || i >= nx_ - 1 || j >= ny_ - 1 || k >= nz_ - 1 || below_floor(k)) return 1.0f;
     return field(at(i, j, k));
   };
-  // A corner that is material only by the conservative guess makes the vertices on its edges hypothetical.
+  // A corner that is material only by the conservative guess makes the vertices on its edges hypothetical;
+  // so does one that is outside only because the volume's border or the table cuts it there (the underside
+  // of an object standing on the plate is that cut, not a measurement, however close to a seen wall).
   auto guessed = [&](long i, long j, long k) {
-    if (i <= 0 || j <= 0 || k <= 0 || i >= nx_ - 1 || j >= ny_ - 1 || k >= nz_ - 1 || below_floor(k)) return false;
+    if (i <= 0 || j <= 0 || k <= 0 || i >= nx_ - 1 || j >= ny_ - 1 || k >= nz_ - 1 || below_floor(k)) return true;
     const std::size_t v = at(i, j, k);
     return weight_[v] == 0.0f && !carved_[v] && behind_[v] >= occluding_views_;
   };

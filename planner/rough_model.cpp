@@ -111,7 +111,7 @@ std::vector<Eigen::Vector3d> area_weighted_normals(const TriangleMesh& mesh) {
   return n;
 }
 
-RoughModel make_rough_model(const TriangleMesh& mesh, const std::vector<int>& labels) {
+RoughModel make_rough_model(const TriangleMesh& mesh, const std::vector<int>& labels, const std::vector<std::uint8_t>& hypothetical) {
   check_label_count(labels, mesh.vertices.size());
   const std::size_t n = mesh.vertices.size();
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
@@ -139,6 +139,12 @@ RoughModel make_rough_model(const TriangleMesh& mesh, const std::vector<int>& la
     rm.segment.resize(n);
     for (std::size_t i = 0; i < n; ++i) rm.segment[i] = labels[order[i]];
   }
+  if (!hypothetical.empty()) {
+    if (hypothetical.size() != n)
+      throw ConfigError("rough model: " + std::to_string(hypothetical.size()) + " hypothetical flags for " + std::to_string(n) + " vertices");
+    rm.hypothetical.resize(n);
+    for (std::size_t i = 0; i < n; ++i) rm.hypothetical[i] = hypothetical[order[i]];
+  }
   rm.triangles = mesh.triangles;
   for (auto& t : rm.triangles)
     for (auto& i : t) i = rank[i];
@@ -156,10 +162,31 @@ RoughModel make_rough_model(const TriangleMesh& mesh, const std::vector<int>& la
   return rm;
 }
 
+namespace {
+
+/// Per-vertex values of `fine` for the vertices of `coarse` found at the same position (`missing` if none).
+template <class T>
+std::vector<T> carry_by_position(const TriangleMesh& fine, const TriangleMesh& coarse, const std::vector<T>& values, T missing) {
+  std::map<std::array<double, 3>, T> at;
+  for (std::size_t i = 0; i < fine.vertices.size(); ++i) at[{fine.vertices[i].x(), fine.vertices[i].y(), fine.vertices[i].z()}] = values[i];
+  std::vector<T> kept(coarse.vertices.size(), missing);
+  for (std::size_t i = 0; i < coarse.vertices.size(); ++i) {
+    const auto it = at.find({coarse.vertices[i].x(), coarse.vertices[i].y(), coarse.vertices[i].z()});
+    if (it != at.end()) kept[i] = it->second;
+  }
+  return kept;
+}
+
+}  // namespace
+
 RoughModel build_rough_model(TriangleMesh mesh, const RoughModelOptions& options, RoughModelReport* report) {
   RoughModelReport r;
   r.input_vertices = mesh.vertices.size();
   std::vector<int> labels = options.vertex_labels;
+  std::vector<std::uint8_t> hypothetical = options.vertex_hypothetical;
+  if (!hypothetical.empty() && hypothetical.size() != mesh.vertices.size())
+    throw ConfigError("rough model: " + std::to_string(hypothetical.size()) + " hypothetical flags for " +
+                      std::to_string(mesh.vertices.size()) + " vertices");
   if (options.target_vertices && options.rho_rel)
     throw ConfigError("rough model: give either a target vertex count or rho_rel, not both");
   check_label_count(labels, mesh.vertices.size());
@@ -172,18 +199,9 @@ RoughModel build_rough_model(TriangleMesh mesh, const RoughModelOptions& options
     if (*target < 4) throw ConfigError("rough model: target vertex count must be at least 4");
     if (*target < mesh.vertices.size()) {
       TriangleMesh coarse = decimate(mesh, *target, &r.faces_rejected_by_decimator);
-      if (!labels.empty()) {
-        // Surviving vertices are bit-exact copies of input vertices: carry their labels across.
-        std::map<std::array<double, 3>, int> label_at;
-        for (std::size_t i = 0; i < mesh.vertices.size(); ++i)
-          label_at[{mesh.vertices[i].x(), mesh.vertices[i].y(), mesh.vertices[i].z()}] = labels[i];
-        std::vector<int> kept(coarse.vertices.size(), -1);
-        for (std::size_t i = 0; i < coarse.vertices.size(); ++i) {
-          auto it = label_at.find({coarse.vertices[i].x(), coarse.vertices[i].y(), coarse.vertices[i].z()});
-          if (it != label_at.end()) kept[i] = it->second;
-        }
-        labels = std::move(kept);
-      }
+      // Surviving vertices are bit-exact copies of input vertices: carry their labels and flags across.
+      if (!labels.empty()) labels = carry_by_position(mesh, coarse, labels, -1);
+      if (!hypothetical.empty()) hypothetical = carry_by_position(mesh, coarse, hypothetical, std::uint8_t{0});
       mesh = std::move(coarse);
       r.decimated = true;
     }
@@ -199,7 +217,7 @@ RoughModel build_rough_model(TriangleMesh mesh, const RoughModelOptions& options
   }
   r.output_vertices = mesh.vertices.size();
   if (report) *report = r;
-  return make_rough_model(mesh, labels);
+  return make_rough_model(mesh, labels, hypothetical);
 }
 
 }  // namespace scancell::planner

@@ -18,6 +18,7 @@ struct RoughModel {
   std::vector<double> area_mm2;          // each vertex's share (1/3) of its triangles' area
   std::vector<Triangle> triangles;
   std::vector<int> segment;              // per row: surface patch label (thesis 3.5.1), -1 none; empty if unsegmented
+  std::vector<std::uint8_t> hypothetical;  // per row: 1 where a rough scan closed unseen space (a guess); empty if none
   double total_area_mm2 = 0.0;
   double mean_edge_mm = 0.0;
 
@@ -33,6 +34,8 @@ struct RoughModelOptions {
   /// Optional segmentation: one label per input vertex (>= 0, or -1 for none). Decimation keeps surviving
   /// vertices where they were, so labels follow them exactly.
   std::vector<int> vertex_labels;
+  /// Optional: 1 per input vertex the rough scan only guessed (planner/fusion.hpp); carried like the labels.
+  std::vector<std::uint8_t> vertex_hypothetical;
 };
 
 struct RoughModelReport {
@@ -48,9 +51,10 @@ TriangleMesh decimate(const TriangleMesh& mesh, std::size_t target_vertices, std
 /// Builds the rough model: optional decimation and normal noise, then normals, areas and Morton order.
 RoughModel build_rough_model(TriangleMesh mesh, const RoughModelOptions& options, RoughModelReport* report = nullptr);
 
-/// Normals, areas and Morton ordering of an already final mesh (no decimation, no noise); `labels`, if given,
-/// one per mesh vertex, become the rows' segments.
-RoughModel make_rough_model(const TriangleMesh& mesh, const std::vector<int>& labels = {});
+/// Normals, areas and Morton ordering of an already final mesh (no decimation, no noise); `labels` and
+/// `hypothetical`, if given, one per mesh vertex, become the rows' segments and hypothetical flags.
+RoughModel make_rough_model(const TriangleMesh& mesh, const std::vector<int>& labels = {},
+                            const std::vector<std::uint8_t>& hypothetical = {});
 
 /// Area-weighted unit vertex normals (unnormalised face normals summed; their length is twice the area).
 std::vector<Eigen::Vector3d> area_weighted_normals(const TriangleMesh& mesh);

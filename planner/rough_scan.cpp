@@ -5,6 +5,8 @@
 #include <filesystem>
 #include <fstream>
 #include <numbers>
+#include <sstream>
+#include <unordered_map>
 
 #include "planner/errors.hpp"
 
@@ -55,6 +57,68 @@ void write_off(const TriangleMesh& m, const std::string& path) {
     if (!f.flush()) throw std::runtime_error(path + ": write failed");
   }
   std::filesystem::rename(tmp, path);
+}
+
+namespace {
+
+// 1 µm grid cells: a vertex written with 6 decimals and read back in single precision lands in its own cell
+// or a neighbour.
+std::uint64_t micro_key(long x, long y, long z) {
+  return (static_cast<std::uint64_t>(x & 0x1fffff) << 42) | (static_cast<std::uint64_t>(y & 0x1fffff) << 21) | static_cast<std::uint64_t>(z & 0x1fffff);
+}
+
+}  // namespace
+
+void write_flagged_vertices(const TriangleMesh& m, const std::vector<std::uint8_t>& flags, const std::string& path) {
+  if (flags.size() != m.vertices.size())
+    throw DataError(path + ": " + std::to_string(flags.size()) + " flags for " + std::to_string(m.vertices.size()) + " vertices");
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream f(tmp);
+    f << "# hypothetical rough-model vertices (unseen space closed conservatively): x y z, mm, object frame\n";
+    char b[96];
+    for (std::size_t i = 0; i < flags.size(); ++i)
+      if (flags[i]) {
+        std::snprintf(b, sizeof b, "%.6f %.6f %.6f\n", m.vertices[i].x(), m.vertices[i].y(), m.vertices[i].z());
+        f << b;
+      }
+    if (!f.flush()) throw std::runtime_error(path + ": write failed");
+  }
+  std::filesystem::rename(tmp, path);
+}
+
+std::vector<std::uint8_t> read_flagged_vertices(const TriangleMesh& m, const std::string& path) {
+  std::ifstream f(path);
+  if (!f) throw DataError(path + ": cannot read");
+  std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> at;
+  for (std::uint32_t i = 0; i < m.vertices.size(); ++i) {
+    const Eigen::Vector3d& v = m.vertices[i];
+    at[micro_key(std::lround(v.x() * 1e3), std::lround(v.y() * 1e3), std::lround(v.z() * 1e3))].push_back(i);
+  }
+  std::vector<std::uint8_t> out(m.vertices.size(), 0);
+  std::string line;
+  for (int n = 1; std::getline(f, line); ++n) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream in(line);
+    Eigen::Vector3d p;
+    if (!(in >> p.x() >> p.y() >> p.z()) || !p.allFinite())
+      throw DataError(path + ":" + std::to_string(n) + ": expected x y z (mm), got '" + line + "'");
+    const long x = std::lround(p.x() * 1e3), y = std::lround(p.y() * 1e3), z = std::lround(p.z() * 1e3);
+    bool found = false;
+    for (long dx = -1; dx <= 1; ++dx)
+      for (long dy = -1; dy <= 1; ++dy)
+        for (long dz = -1; dz <= 1; ++dz) {
+          const auto it = at.find(micro_key(x + dx, y + dy, z + dz));
+          if (it == at.end()) continue;
+          for (auto i : it->second)
+            if ((m.vertices[i] - p).norm() < 2e-3) {
+              out[i] = 1;
+              found = true;
+            }
+        }
+    if (!found) throw DataError(path + ":" + std::to_string(n) + ": no vertex of the rough model at " + line + " (not this model's list)");
+  }
+  return out;
 }
 
 }  // namespace scancell::planner

@@ -2,6 +2,7 @@
 // The rough scan (thesis 1.2.2, 3.1): before anything is known of the object but its approximate size, a
 // preprogrammed exploration — turntable steps × a few camera elevations, far out, long sweeps — whose range
 // images are fused (planner/fusion.hpp) into the rough model the planner starts from.
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -36,5 +37,13 @@ Eigen::AlignedBox3d exploration_bounds(const Eigen::Vector3d& size_mm);
 
 /// A mesh written as OFF (written to a temp file and renamed).
 void write_off(const TriangleMesh& mesh, const std::string& path);
+
+/// The vertices of `mesh` flagged in `flags` (the rough scan's hypothetical ones), one "x y z" line each in
+/// the OFF's own precision, so they can be found again in the mesh as loaded (the loader welds and reorders).
+void write_flagged_vertices(const TriangleMesh& mesh, const std::vector<std::uint8_t>& flags, const std::string& path);
+
+/// Per vertex of `mesh`: 1 where a vertex listed in `path` lies (within 2 µm). DataError when the file is
+/// unreadable or malformed (naming the line), or when a listed vertex is not in the mesh (not its list).
+std::vector<std::uint8_t> read_flagged_vertices(const TriangleMesh& mesh, const std::string& path);
 
 }  // namespace scancell::planner

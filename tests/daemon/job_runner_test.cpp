@@ -301,6 +301,11 @@ TEST_F(SimCell, FromABoundingBoxRoughScanThenPlanAndMeasure) {
   std::cout << "bbox job: rough model " << rough.vertices.size() << " vertices (worst " << worst << " mm from the cube), " << result["views"]
             << " views, measured " << result["measured_coverage"] << ", verified m_v " << result["verified_mv"] << "\n";
   EXPECT_NEAR(result["verified_mv"].get<double>(), 5.0 / 6.0, 0.06);
+  // The underside the rough scan could not see is flagged as a guess in the rough model's rows, and kept
+  // apart from the seen surface in the verdict.
+  std::cout << "hypothetical rows " << result["hypothetical_rows"] << ", unmeasured " << result["hypothetical_unmeasured_rows"] << "\n";
+  EXPECT_GT(result["hypothetical_rows"].get<int>(), 5);
+  EXPECT_TRUE(fs::exists(dir / "data" / "jobs" / std::to_string(job) / "rough.hypothetical.xyz"));
   EXPECT_TRUE(journal->check().empty());
 }
 

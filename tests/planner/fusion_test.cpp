@@ -1,13 +1,19 @@
 // The rough model from a rough scan: range images of a sphere and of a box fused into a TSDF volume and
 // contoured with marching tetrahedra come back closed, manifold and within one voxel of the truth; what no ray
 // saw is closed conservatively and marked hypothetical.
+#include <filesystem>
+#include <fstream>
 #include <map>
+
+#include <unistd.h>
 
 #include <gtest/gtest.h>
 
 #include "planner/config.hpp"
+#include "planner/errors.hpp"
 #include "planner/fusion.hpp"
 #include "planner/rough_model.hpp"
+#include "planner/rough_scan.hpp"
 #include "test_meshes.hpp"
 
 namespace scancell::planner {
@@ -135,6 +141,55 @@ TEST(Fusion, BoxOnATableIsClosedUnderneathAndTheGuessIsMarked) {
   EXPECT_LE(worst, vol.voxel_mm());
   EXPECT_GT(bottom, 100u);
   EXPECT_EQ(bottom_guess, bottom);
+}
+
+TEST(Fusion, HypotheticalFlagsSurviveTheFileAndTheDecimation) {
+  // The cube on its table: written as OFF with its flag list, loaded back (the loader welds and reorders),
+  // decimated to 300 rows: the rows on the unseen underside are hypothetical, the others are not.
+  TriangleMesh truth = load_mesh(testing::source_path("tests/data/cube50.off"));
+  FusionOptions o;
+  o.floor_z_mm = 0.0;
+  TsdfVolume vol(Eigen::AlignedBox3d(Eigen::Vector3d::Constant(-8), Eigen::Vector3d::Constant(58)), o);
+  for (const auto& img : scans_around(truth, {25, 25, 25}, 220.0, true)) vol.integrate(img);
+  const FusedModel f = vol.extract();
+  const auto dir = std::filesystem::temp_directory_path() / ("scancell_flags_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  write_flagged_vertices(f.mesh, f.hypothetical, (dir / "rough.hypothetical.xyz").string());
+  write_off(f.mesh, (dir / "rough.off").string());
+  const TriangleMesh loaded = load_mesh(dir / "rough.off");
+  RoughModelOptions ro;
+  ro.target_vertices = 300;
+  ro.vertex_hypothetical = read_flagged_vertices(loaded, (dir / "rough.hypothetical.xyz").string());
+  std::size_t flagged = 0, guessed = 0;
+  for (std::size_t i = 0; i < f.hypothetical.size(); ++i) flagged += f.hypothetical[i];
+  for (auto h : ro.vertex_hypothetical) guessed += h;
+  EXPECT_EQ(guessed, flagged);
+  const RoughModel rough = build_rough_model(loaded, ro);
+  ASSERT_EQ(rough.hypothetical.size(), rough.size());
+  std::size_t bottom = 0, bottom_guess = 0, wrong = 0;
+  for (std::size_t r = 0; r < rough.size(); ++r) {
+    if (rough.normals[r].z() < -0.9) {  // facing the plate
+      ++bottom;
+      bottom_guess += rough.hypothetical[r];
+    } else if (rough.points[r].z() > 3.0) {
+      wrong += rough.hypothetical[r];  // seen surface marked a guess
+    }
+  }
+  EXPECT_GT(bottom, 3u);
+  EXPECT_EQ(bottom_guess, bottom);
+  EXPECT_EQ(wrong, 0u);
+  // A list that is not this model's is refused, naming the line.
+  {
+    std::ofstream bad(dir / "other.xyz");
+    bad << "# x y z\n12.5 900.0 3.0\n";
+  }
+  try {
+    read_flagged_vertices(loaded, (dir / "other.xyz").string());
+    ADD_FAILURE() << "a foreign list was accepted";
+  } catch (const DataError& e) {
+    EXPECT_NE(std::string(e.what()).find("other.xyz:2"), std::string::npos) << e.what();
+  }
+  std::filesystem::remove_all(dir);
 }
 
 TEST(Fusion, ThinAndConcaveShapesStayManifoldAndDecimateWithoutLosingFaces) {
