@@ -257,33 +257,48 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
     result["unmeasured_file"] = path.string();
   }
   // Simulation: the same coverage of the rough model from where the samples really are (the simulator's
-  // ground-truth hit points), counting only samples the daemon stored within 3 × the precision spec of
-  // where they really are: data off by more is not a measurement to the spec, wherever it landed. How far
-  // registration (or its absence) lets the measured figure be trusted.
+  // ground-truth hit points), counting only samples the daemon stored within 3 × the precision spec of the
+  // true surface (along its normal: a slide along the surface does not make the data wrong, a step off it
+  // does). How far registration (or its absence) lets the measured figure be trusted.
   if (state != JobState::aborted && !images.empty() && j.rough) {
     sp::MeasuredCoverage truth(*j.rough, j.spec, settings_.coverage);
     const double tolerance = 3.0 * j.spec.precision_mm;
-    double ss = 0.0;
-    std::size_t n = 0, off = 0;
+    const sp::TriangleMesh& fine = j.truth_object;
+    double ss = 0.0, ssn = 0.0;
+    std::size_t n = 0, nn = 0, off = 0;
     for (auto img : images) {
-      for (auto& smp : img.samples)
+      // The samples the daemon counted as compliant, as it counted them (their density from the stored,
+      // noisy positions), moved to where they really are.
+      std::vector<std::uint8_t> compliant = sp::MeasuredCoverage::compliant_samples(img, j.spec);
+      for (std::size_t k = 0; k < img.samples.size(); ++k) {
+        auto& smp = img.samples[k];
         if (smp.valid()) {
-          const double e = (smp.object_mm - smp.true_object_mm).cast<double>().norm();
-          ss += e * e;
+          const Eigen::Vector3d e = (smp.object_mm - smp.true_object_mm).cast<double>();
+          ss += e.squaredNorm();
           ++n;
           smp.object_mm = smp.true_object_mm;
-          if (e > tolerance) {
-            smp.triangle = sp::kNoHit;
+          if (smp.triangle >= fine.triangles.size()) continue;  // the plate
+          const auto& t = fine.triangles[smp.triangle];
+          const Eigen::Vector3d normal =
+              (fine.vertices[t[1]] - fine.vertices[t[0]]).cross(fine.vertices[t[2]] - fine.vertices[t[0]]).normalized();
+          const double en = std::abs(e.dot(normal));
+          ssn += en * en;
+          ++nn;
+          if (en > tolerance) {
+            compliant[k] = 0;
             ++off;
           }
         }
-      truth.add(img);
+      }
+      truth.add(img, &compliant);
     }
     result["verified_coverage"] = truth.coverage();
     // How far the stored samples are from the surface points the laser really hit (pose error left after
-    // registration, plus range noise), and the share stored farther off than the tolerance.
+    // registration, plus range noise): in 3-D, across the true surface, and the share farther across it than
+    // the tolerance.
     result["sample_error_rms_mm"] = n ? std::sqrt(ss / static_cast<double>(n)) : 0.0;
-    result["samples_off_spec"] = n ? static_cast<double>(off) / static_cast<double>(n) : 0.0;
+    result["sample_normal_error_rms_mm"] = nn ? std::sqrt(ssn / static_cast<double>(nn)) : 0.0;
+    result["samples_off_spec"] = nn ? static_cast<double>(off) / static_cast<double>(nn) : 0.0;
   }
   // Simulation: verified measurability of the stored scans against the object actually on the table.
   if (state != JobState::aborted && !images.empty() && !j.truth_object.vertices.empty()) {

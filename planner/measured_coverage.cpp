@@ -99,14 +99,28 @@ MeasuredCoverage::MeasuredCoverage(const RoughModel& rough, const ModelSpec& spe
   std::sort(row_grid_.begin(), row_grid_.end());
 }
 
-std::size_t MeasuredCoverage::add(const RangeImage& img) {
+std::vector<std::uint8_t> MeasuredCoverage::compliant_samples(const RangeImage& img, const ModelSpec& spec) {
+  std::vector<std::uint8_t> out(img.samples.size(), 0);
+  for (int j = 0; j < img.rows; ++j)
+    for (int i = 0; i < img.columns; ++i) {
+      const RangeSample& s = img.at(i, j);
+      out[static_cast<std::size_t>(j) * static_cast<std::size_t>(img.columns) + static_cast<std::size_t>(i)] =
+          s.valid() && s.sigma_z_mm <= spec.precision_mm && sample_density_per_mm2(img, i, j) >= spec.density_per_mm2;
+    }
+  return out;
+}
+
+std::size_t MeasuredCoverage::add(const RangeImage& img, const std::vector<std::uint8_t>* given) {
+  if (given && given->size() != img.samples.size())
+    throw DataError("measured coverage: " + std::to_string(given->size()) + " compliance flags for " + std::to_string(img.samples.size()) + " samples");
+  const std::vector<std::uint8_t> mask = given ? std::vector<std::uint8_t>{} : compliant_samples(img, spec_);
+  const std::vector<std::uint8_t>& compliant = given ? *given : mask;
   const Eigen::Matrix3d rot = img.pose.camera_to_object.linear();
   std::size_t landed = 0;
   for (int j = 0; j < img.rows; ++j)
     for (int i = 0; i < img.columns; ++i) {
       const RangeSample& s = img.at(i, j);
-      if (!s.valid() || s.sigma_z_mm > spec_.precision_mm) continue;
-      if (sample_density_per_mm2(img, i, j) < spec_.density_per_mm2) continue;
+      if (!s.valid() || !compliant[static_cast<std::size_t>(j) * static_cast<std::size_t>(img.columns) + static_cast<std::size_t>(i)]) continue;
       const Eigen::Vector3d p = s.object_mm.cast<double>();
       // Towards the laser: in a line scan the laser of this profile sits at (0, y, 0) in the camera frame, y
       // being the sample's own y; a random-access camera's laser is at the origin.

@@ -27,8 +27,12 @@ class MeasuredCoverage {
   MeasuredCoverage(const RoughModel& rough, const ModelSpec& spec, CoverageOptions options = {});
 
   /// Adds one range image (object-frame samples from the executed poses); returns the compliant samples
-  /// that landed on some row.
-  std::size_t add(const RangeImage& image);
+  /// that landed on some row. `compliant`, if given (one flag per sample), replaces the precision and
+  /// density tests: to count the same samples at other positions (verification from the true hit points).
+  std::size_t add(const RangeImage& image, const std::vector<std::uint8_t>* compliant = nullptr);
+
+  /// Per sample of `image`: 1 where it meets the spec's precision and sampling density (the test add() makes).
+  static std::vector<std::uint8_t> compliant_samples(const RangeImage& image, const ModelSpec& spec);
 
   std::size_t rows() const { return footprint_.size(); }
   /// Filled fraction of a row's footprint, 0..1.

@@ -27,18 +27,27 @@ std::vector<ExplorationView> exploration_views(const CellModel& cell, const Sens
   // The centre mid-range: the near side beyond R_min, the far side within R_max.
   const double standoff = std::min(sensor.range_max_mm - radius - 5.0, std::max(sensor.range_min_mm + radius + 5.0, 0.5 * (sensor.range_min_mm + sensor.range_max_mm)));
   const double length = std::clamp(2.0 * radius, sensor.scan_length_min_mm, sensor.scan_length_max_mm);
-  const Eigen::Vector3d centre(0.0, 0.0, 0.5 * size.z());
+  // The sweep runs horizontally; the profile's fan (Φx) spans the height. An object taller than ~80 % of the
+  // fan's width at the stand-off is explored at several aim heights, evenly up the box, so that no band of it
+  // is left to the fusion's guess.
+  const double fan_mm = 2.0 * standoff * std::tan(0.5 * sensor.fov_x_rad);
+  const int levels = std::max(1, static_cast<int>(std::ceil(size.z() / (0.8 * fan_mm))));
   std::vector<ExplorationView> out;
-  for (double tilt : o.tilts_rad)
-    for (int k = 0; k < o.table_steps; ++k) {
-      const double table = -std::numbers::pi + 2.0 * std::numbers::pi * k / o.table_steps;
-      const IkResult ik = look_at(cell, centre, standoff, tilt, table, length);
-      if (!ik.ok) {
-        if (skipped) skipped->push_back("table " + std::to_string(table) + " rad, tilt " + std::to_string(tilt) + " rad: " + ik.why);
-        continue;
+  for (int level = 0; level < levels; ++level) {
+    const Eigen::Vector3d aim(0.0, 0.0, size.z() * (level + 0.5) / levels);
+    for (double tilt : o.tilts_rad)
+      for (int k = 0; k < o.table_steps; ++k) {
+        const double table = -std::numbers::pi + 2.0 * std::numbers::pi * k / o.table_steps;
+        const IkResult ik = look_at(cell, aim, standoff, tilt, table, length);
+        if (!ik.ok) {
+          if (skipped)
+            skipped->push_back("aim height " + std::to_string(aim.z()) + " mm, table " + std::to_string(table) + " rad, tilt " +
+                               std::to_string(tilt) + " rad: " + ik.why);
+          continue;
+        }
+        out.push_back({ik.q, length});
       }
-      out.push_back({ik.q, length});
-    }
+  }
   if (out.empty()) throw DataError("rough scan: the cell reaches none of the exploration poses");
   return out;
 }

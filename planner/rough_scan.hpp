@@ -26,8 +26,9 @@ struct ExplorationView {
 };
 
 /// Views of a box `size_mm` (x, y, z) standing centred on the turntable (its base on the table top, z = 0 of
-/// the cell's object frame, which must be the table frame). The box's centre sits mid-range; poses the cell
-/// cannot reach are skipped and named in `skipped`. DataError when the box is larger than the sensor's
+/// the cell's object frame, which must be the table frame). The box's centre sits mid-range, aimed at from
+/// one height, or several up the box when it is taller than the profile's fan covers; poses the cell cannot
+/// reach are skipped and named in `skipped`. DataError when the box is larger than the sensor's
 /// range can take or no pose is reachable.
 std::vector<ExplorationView> exploration_views(const CellModel& cell, const SensorModel& sensor, const Eigen::Vector3d& size_mm,
                                                const ExplorationOptions& options, std::vector<std::string>* skipped = nullptr);

@@ -104,9 +104,9 @@ void print_result(const json& reply, double seconds) {
   std::printf("  %-34s %.4f\n", "measured coverage (rough model)", num("measured_coverage"));
   if (r.contains("verified_coverage"))
     std::printf("  %-34s %.4f  (true positions, samples within 3 x the precision spec)\n", "verified coverage (rough model)", num("verified_coverage"));
-  if (r.contains("sample_error_rms_mm"))
-    std::printf("  %-34s %.3f mm RMS, %.2f %% beyond 3 x the precision spec\n", "stored samples vs true hit points", num("sample_error_rms_mm"),
-                100.0 * num("samples_off_spec"));
+  if (r.contains("sample_normal_error_rms_mm"))
+    std::printf("  %-34s %.3f mm RMS across the surface (%.3f mm in 3-D), %.2f %% beyond 3 x the precision spec\n",
+                "stored samples vs true hit points", num("sample_normal_error_rms_mm"), num("sample_error_rms_mm"), 100.0 * num("samples_off_spec"));
   if (r.contains("verified_mv"))
     std::printf("  %-34s %.4f  (against %s)\n", "verified m_v (ground truth)", num("verified_mv"), r["verified_against"].get<std::string>().c_str());
   std::printf("  %-34s %.1f mm2 in %d rows\n", "not measured, measurable", num("open_area_mm2"), r.value("open_rows", 0));

@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <set>
 
 #include <unistd.h>
 
@@ -190,6 +191,30 @@ TEST(Fusion, HypotheticalFlagsSurviveTheFileAndTheDecimation) {
     EXPECT_NE(std::string(e.what()).find("other.xyz:2"), std::string::npos) << e.what();
   }
   std::filesystem::remove_all(dir);
+}
+
+TEST(RoughScan, ExplorationAimsUpATallBoxAtSeveralHeights) {
+  // The profile's fan is ~130 mm wide at the exploration stand-off: a 60 mm box is aimed at from its middle,
+  // a 170 mm one from two heights (42.5 and 127.5 mm), each covering its half.
+  CellModel cell = load_cell(testing::source_path("config/cells/turntable-lift-tilt.yaml"));
+  cell.object_on_table = Eigen::Isometry3d::Identity();
+  const SensorModel s = load_sensor(testing::source_path("config/sensors/line-scan-thesis.yaml"));
+  auto aim_heights = [&](const Eigen::Vector3d& size) {
+    std::vector<std::string> skipped;
+    std::set<long> heights;
+    for (const auto& v : exploration_views(cell, s, size, {}, &skipped)) {
+      // Where the boresight passes the turntable's axis (x = y = 0 of the table frame).
+      const Eigen::Isometry3d cam = forward_kinematics(cell, v.q);
+      const Eigen::Vector3d o = cam.translation(), d = cam.linear().col(2);
+      const double t = -(o.head<2>().dot(d.head<2>())) / d.head<2>().squaredNorm();
+      EXPECT_LT((o + t * d).head<2>().norm(), 0.5);
+      heights.insert(std::lround((o + t * d).z() * 2.0));  // half-millimetre bins
+    }
+    EXPECT_TRUE(skipped.empty()) << skipped.front();
+    return heights;
+  };
+  EXPECT_EQ(aim_heights({60, 60, 60}), (std::set<long>{60}));
+  EXPECT_EQ(aim_heights({60, 60, 170}), (std::set<long>{85, 255}));
 }
 
 TEST(Fusion, ThinAndConcaveShapesStayManifoldAndDecimateWithoutLosingFaces) {
