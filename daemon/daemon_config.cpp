@@ -101,6 +101,8 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
     if (c.jobs.move_timeout.count() <= 0) s.fail(s.key_path("move_timeout_s"), "must be > 0");
     c.jobs.scan_speed_mm_s = s.non_negative("scan_speed_mm_s", 0.0);
     c.jobs.trigger_width = std::chrono::microseconds(static_cast<long>(s.non_negative("trigger_width_us", 0.0)));
+    c.jobs.register_views = s.get_or<bool>("register_views", c.jobs.register_views);
+    c.jobs.fused_model_sigma_mm = s.non_negative("fused_model_sigma_mm", c.jobs.fused_model_sigma_mm);
     c.jobs.planner_threads = s.get_or<int>("planner_threads", 0);
     if (c.jobs.planner_threads < 0) s.fail(s.key_path("planner_threads"), "must be >= 0 (0: all cores)");
     c.home_timeout = std::chrono::milliseconds(static_cast<long>(1000.0 * s.get_or<double>("home_timeout_s", 60.0)));

@@ -643,11 +643,17 @@ void JobRunner::execute_view(Job& j, std::int64_t plan, const ViewRecord& v, con
     // Rotations about each profile's laser origin: a camera orientation error shears a line scan.
     const sp::IcpResult r = sp::register_scan(sp::scan_samples(img), *j.cloud, settings_.icp);
     if (r.ok) {
-      sp::apply_correction(img, r.correction);
+      // Against a fused rough model the correction is partly the model's own error: believe it as far as
+      // the positioner is less certain than the model.
+      const double weight = j.request.bbox_mm ? sp::correction_weight(cell.pose_error, models_.sensor.optimal_standoff_mm,
+                                                                        settings_.fused_model_sigma_mm)
+                                              : 1.0;
+      sp::apply_correction(img, sp::scale_correction(r.correction, weight));
       registration = ", registered (samples moved " + fmt(r.moved_mean_mm, 3) + " mm on average, " + fmt(r.moved_max_mm, 3) +
                      " mm at most, turned " + fmt(Eigen::AngleAxisd(r.correction.linear()).angle() * 180.0 / M_PI, 3) + "°, residual " +
                      fmt(r.rms_mm, 3) + " mm" +
-                     (r.free_directions ? ", " + std::to_string(r.free_directions) + " directions left as positioned" : "") + ")";
+                     (r.free_directions ? ", " + std::to_string(r.free_directions) + " directions left as positioned" : "") +
+                     (weight < 0.999 ? ", applied at " + fmt(weight, 2) + " against the rough model's own error" : "") + ")";
     } else {
       note = "registration failed: " + r.why;
       registration = ", " + note + "; not counted";

@@ -82,6 +82,10 @@ struct JobSettings {
   }();
   std::filesystem::path jobs_dir;                  // per-job outputs (coverage picture, unmeasured rows)
   planner::ExplorationOptions rough_scan;          // jobs that start from a bounding box
+  /// How far off the registration target may be, mm: a submitted mesh is taken as the object (0); a fused
+  /// rough model is off by a fraction of its voxel. Corrections are believed in proportion to the cell's
+  /// pose-error model against this (planner::correction_weight).
+  double fused_model_sigma_mm = 0.4;
 };
 
 /// The models a job plans and executes with (the daemon's configuration; defaults for spec and settings).

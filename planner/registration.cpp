@@ -374,4 +374,19 @@ IcpResult register_points(const std::vector<Eigen::Vector3d>& pts_in, const Mode
   return r;
 }
 
+double correction_weight(const PoseErrorModel& e, double range_mm, double model_sigma_mm) {
+  const double pose2 = e.sigma_p_mm * e.sigma_p_mm + std::pow(e.sigma_a_rad * range_mm, 2);
+  const double model2 = model_sigma_mm * model_sigma_mm;
+  if (!(pose2 + model2 > 0.0)) return 1.0;
+  return pose2 / (pose2 + model2);
+}
+
+Eigen::Isometry3d scale_correction(const Eigen::Isometry3d& c, double weight) {
+  const Eigen::AngleAxisd turn(c.linear());
+  Eigen::Isometry3d out = Eigen::Isometry3d::Identity();
+  out.linear() = Eigen::AngleAxisd(weight * turn.angle(), turn.axis()).toRotationMatrix();
+  out.translation() = weight * c.translation();
+  return out;
+}
+
 }  // namespace scancell::planner

@@ -13,6 +13,7 @@
 #include <Eigen/Geometry>
 
 #include "planner/mesh.hpp"
+#include "planner/pose_error.hpp"
 #include "planner/virtual_scanner.hpp"
 
 namespace scancell::planner {
@@ -96,5 +97,14 @@ void apply_correction(RangeImage& image, const Eigen::Isometry3d& correction);
 IcpResult register_points(const std::vector<Eigen::Vector3d>& points, const ModelCloud& model, const IcpOptions& options = {},
                           const std::vector<Eigen::Vector3d>& pivots = {}, const std::vector<Eigen::Vector3d>& normals = {});
 IcpResult register_scan(const ScanSamples& samples, const ModelCloud& model, const IcpOptions& options = {});
+
+/// How much of a registration correction to believe (0..1): the positioner's expected error against the
+/// target's. A correction measured against a model that is itself off by σ_model tells the pose only as far
+/// as the pose is less certain than the model (the linear-Gaussian estimate σ_pose² / (σ_pose² + σ_model²)).
+/// σ_pose: the sample displacement the cell's pose-error model predicts at `range_mm`.
+double correction_weight(const PoseErrorModel& positioner, double range_mm, double model_sigma_mm);
+
+/// The correction scaled by `weight`: its turn (angle about the same axis) and its shift.
+Eigen::Isometry3d scale_correction(const Eigen::Isometry3d& correction, double weight);
 
 }  // namespace scancell::planner
