@@ -237,7 +237,7 @@ IcpResult register_points(const std::vector<Eigen::Vector3d>& pts_in, const Mode
     normals.push_back(normals_in.empty() ? Eigen::Vector3d::Zero() : normals_in[i]);
   }
   if (pts.size() < 50) {
-    r.why = std::to_string(pts_in.size()) + " samples, too few to register";
+    r.why = std::to_string(pts.size()) + " samples" + (normals_in.empty() ? "" : " with a surface normal") + ", too few to register";
     return r;
   }
   // The correction so far: rotation w about each point's pivot, then translation d (see the header).
@@ -299,11 +299,9 @@ IcpResult register_points(const std::vector<Eigen::Vector3d>& pts_in, const Mode
     // Which motions does the view's shape fix? For a motion x, x'·ata·x is how much it changes the residuals
     // and x'·disp·x how far it moves the samples: their ratio λ (0..1, the share of the motion across the
     // surface) is near 0 for a slide — along a plane, an edge, round a surface of revolution (thesis 8.2).
-    // Judged on the samples' motion, not on the unknowns, so a motion that moves no sample (a line scan's
-    // camera turned about its profiles' pivots and shifted back) is no defect.
-    // A motion that moves no sample at all (a flat face's stripes are lines: turning the camera about them
-    // changes nothing) is neither fixed nor a slide; the ridge makes it cost a little, so that it reads as
-    // free and the fixed directions carry none of it.
+    // Judged on the samples' motion, not on the unknowns. A motion that moves no sample at all (a flat face's
+    // stripes are lines: turning the camera about them changes nothing) is neither fixed nor a slide; the
+    // ridge makes it cost a little, so that it reads as free and the fixed directions carry none of it.
     disp += Eigen::Matrix<double, 6, 6>::Identity() * (1e-4 * disp.trace() / 6.0);
     Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> es(ata, disp);
     r.conditioning = es.eigenvalues()(0);
