@@ -12,6 +12,7 @@
 #include "planner/errors.hpp"
 #include "planner/mesh.hpp"
 #include "planner/pose_error.hpp"
+#include "planner/surface_distance.hpp"
 #include "planner/verify.hpp"
 #include "planner/virtual_scanner.hpp"
 
@@ -171,6 +172,7 @@ struct JobRunner::Job {
   std::unique_ptr<ScanHead> head;
   sp::CellModel cell;               // with the object's placement on the table
   sp::TriangleMesh truth_table;     // simulation, bounding-box jobs: the object as it stands on the table
+  json rough_quality;               // simulation, bounding-box jobs: the fused rough model against the truth
   sp::TriangleMesh truth_object;    // simulation: the object on the table, in the plan's object frame
   std::vector<std::uint32_t> unmeasurable;  // rows no candidate of the first plan measures
   Progress progress;
@@ -212,6 +214,7 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
       if (state != JobState::aborted && s.note.empty()) images.push_back(sp::range_image_from_ply(journal_.read_scan(s), s.file));
     }
   result["views"] = views;
+  if (!j.rough_quality.is_null()) result["rough_model"] = j.rough_quality;
   if (j.rough && j.coverage) {
     double area = 0.0;
     std::vector<std::uint32_t> rows = j.coverage->unmeasured_rows();
@@ -610,6 +613,29 @@ void JobRunner::rough_scan(Job& j, const std::atomic<int>& stop) {
   const auto flags = dir / "rough.hypothetical.xyz";
   if (std::filesystem::exists(flags)) j.rough_options.vertex_hypothetical = sp::read_flagged_vertices(j.object, flags.string());
   else journal_.event(j.id, "rough model: no " + flags.string() + " (a job from before the flags were kept): every row counts as seen");
+  // Simulation: the fused rough model against the object really on the table — its seen part, and the
+  // whole with its guesses.
+  if (!j.truth_table.vertices.empty()) {
+    std::vector<std::uint8_t> seen(j.object.vertices.size(), 1);
+    for (std::size_t v = 0; v < seen.size() && v < j.rough_options.vertex_hypothetical.size(); ++v) seen[v] = !j.rough_options.vertex_hypothetical[v];
+    const sp::SurfaceComparison all = sp::compare_surfaces(j.object, j.truth_table);
+    const sp::SurfaceComparison part = sp::compare_surfaces(j.object, j.truth_table, seen);
+    j.rough_quality = {{"hausdorff_mm", all.hausdorff_mm},
+                       {"rough_to_fine_max_mm", all.model_to_truth_max_mm},
+                       {"fine_to_rough_max_mm", all.truth_to_model_max_mm},
+                       {"fine_to_rough_mean_mm", all.truth_to_model_mean_mm},
+                       {"seen_rough_to_fine_max_mm", part.model_to_truth_max_mm},
+                       {"seen_rough_to_fine_mean_mm", part.model_to_truth_mean_mm},
+                       {"seen_normal_error_mean_rad", part.normal_error_mean_rad},
+                       {"seen_normal_error_p95_rad", part.normal_error_p95_rad},
+                       {"seen_vertices", part.model_vertices},
+                       {"vertices", j.object.vertices.size()}};
+    journal_.event(j.id, "rough model vs the object on the table: Hausdorff " + fmt(all.hausdorff_mm, 2) + " mm (fine to rough " +
+                             fmt(all.truth_to_model_max_mm, 2) + " mm at most, " + fmt(all.truth_to_model_mean_mm, 3) +
+                             " mm mean); seen part within " + fmt(part.model_to_truth_max_mm, 2) + " mm (" + fmt(part.model_to_truth_mean_mm, 3) +
+                             " mm mean), normals " + fmt(part.normal_error_mean_rad * 180.0 / M_PI, 1) + "° mean, " +
+                             fmt(part.normal_error_p95_rad * 180.0 / M_PI, 1) + "° at the 95th percentile");
+  }
 }
 
 void JobRunner::execute_view(Job& j, std::int64_t plan, const ViewRecord& v, const std::atomic<int>& stop) {

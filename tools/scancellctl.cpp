@@ -102,6 +102,11 @@ void print_result(const json& reply, double seconds) {
   std::printf("  %-34s %d\n", "plan rounds", r.value("rounds", 0));
   std::printf("  %-34s %.4f\n", "estimated coverage (planner)", num("estimated_coverage"));
   std::printf("  %-34s %.4f\n", "measured coverage (rough model)", num("measured_coverage"));
+  if (r.contains("rough_model")) {
+    const json& q = r["rough_model"];
+    std::printf("  %-34s Hausdorff %.2f mm; seen part %.3f mm mean, normals %.1f deg mean (ground truth)\n", "fused rough model",
+                q.value("hausdorff_mm", NAN), q.value("seen_rough_to_fine_mean_mm", NAN), q.value("seen_normal_error_mean_rad", NAN) * 180.0 / M_PI);
+  }
   if (r.contains("verified_coverage"))
     std::printf("  %-34s %.4f  (true positions, samples within 3 x the precision spec)\n", "verified coverage (rough model)", num("verified_coverage"));
   if (r.contains("sample_normal_error_rms_mm"))

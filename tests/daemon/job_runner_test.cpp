@@ -309,6 +309,14 @@ TEST_F(SimCell, FromABoundingBoxRoughScanThenPlanAndMeasure) {
   // apart from the seen surface in the verdict.
   std::cout << "hypothetical rows " << result["hypothetical_rows"] << ", unmeasured " << result["hypothetical_unmeasured_rows"] << "\n";
   EXPECT_GT(result["hypothetical_rows"].get<int>(), 5);
+  // The rough model against the cube (issue 9's quality check): the seen part within the 2.5 mm found above,
+  // the whole — the guessed underside too — within 2 voxels, normals mostly right (edges are rounded).
+  const auto& q = result["rough_model"];
+  std::cout << "rough model vs truth: " << q.dump() << "\n";
+  EXPECT_LT(q["seen_rough_to_fine_max_mm"].get<double>(), 2.5);
+  EXPECT_LT(q["seen_rough_to_fine_mean_mm"].get<double>(), 0.5);
+  EXPECT_LT(q["hausdorff_mm"].get<double>(), 3.0);
+  EXPECT_LT(q["seen_normal_error_mean_rad"].get<double>(), 0.2);
   EXPECT_TRUE(fs::exists(dir / "data" / "jobs" / std::to_string(job) / "rough.hypothetical.xyz"));
   EXPECT_TRUE(journal->check().empty());
 }
