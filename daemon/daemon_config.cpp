@@ -89,6 +89,35 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
     }
     s.finish();
   }
+  if (y.has("rough_scan")) {
+    // Bounding-box jobs: the exploration program and the fusion of its images (docs/rough-scan.md).
+    sp::Section s = y.section("rough_scan");
+    auto& r = c.jobs.rough_scan;
+    r.table_steps = s.get_or<int>("table_steps", r.table_steps);
+    if (r.table_steps < 3 || r.table_steps > 72) s.fail(s.key_path("table_steps"), "must be in [3, 72]");
+    if (s.has("tilts_rad")) {
+      r.tilts_rad.clear();
+      const YAML::Node n = s.raw("tilts_rad");
+      if (!n.IsSequence() || n.size() == 0) s.fail(s.key_path("tilts_rad"), "must be a list of camera tilts, rad");
+      for (std::size_t k = 0; k < n.size(); ++k) {
+        double t = 0.0;
+        try {
+          t = n[k].as<double>();
+        } catch (const YAML::Exception&) {
+          s.fail(s.key_path("tilts_rad") + "[" + std::to_string(k) + "]", "cannot read it as a number");
+        }
+        if (!(std::abs(t) < 1.5)) s.fail(s.key_path("tilts_rad") + "[" + std::to_string(k) + "]", "must be within ±1.5 rad");
+        r.tilts_rad.push_back(t);
+      }
+    }
+    r.fusion.voxel_mm = s.get_or<double>("voxel_mm", r.fusion.voxel_mm);
+    if (!(r.fusion.voxel_mm >= 0.25 && r.fusion.voxel_mm <= 10.0)) s.fail(s.key_path("voxel_mm"), "must be in [0.25, 10] mm");
+    r.fusion.truncation_voxels = s.get_or<double>("truncation_voxels", r.fusion.truncation_voxels);
+    if (!(r.fusion.truncation_voxels >= 1.0 && r.fusion.truncation_voxels <= 10.0)) s.fail(s.key_path("truncation_voxels"), "must be in [1, 10]");
+    r.fusion.occluding_views = s.get_or<int>("occluding_views", r.fusion.occluding_views);
+    if (r.fusion.occluding_views < 1) s.fail(s.key_path("occluding_views"), "must be >= 1");
+    s.finish();
+  }
   if (y.has("jobs")) {
     sp::Section s = y.section("jobs");
     c.jobs.max_rounds = s.get_or<int>("max_rounds", c.jobs.max_rounds);

@@ -263,7 +263,7 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
   // ground-truth hit points), counting only samples the daemon stored within 3 × the precision spec of the
   // true surface (along its normal: a slide along the surface does not make the data wrong, a step off it
   // does). How far registration (or its absence) lets the measured figure be trusted.
-  if (state != JobState::aborted && !images.empty() && j.rough) {
+  if (state != JobState::aborted && !images.empty() && j.rough && !j.truth_object.vertices.empty()) {
     sp::MeasuredCoverage truth(*j.rough, j.spec, settings_.coverage);
     const double tolerance = 3.0 * j.spec.precision_mm;
     const sp::TriangleMesh& fine = j.truth_object;

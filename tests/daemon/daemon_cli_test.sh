@@ -28,6 +28,10 @@ out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
 [ $rc = 4 ] || fail "bad config: exit $rc, want 4"
 echo "$out" | grep -q "jobs.max_roundz: unknown key" || fail "bad config message: $out"
 write_config "{driver: sim}" "$JOBS}"
+printf 'rough_scan:\n  tilts_rad: [1.15, x]\n' >> "$W/scancelld.yaml"
+out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
+[ $rc = 4 ] && echo "$out" | grep -q "rough_scan.tilts_rad\[1\]: cannot read it as a number" || fail "bad rough_scan: exit $rc: $out"
+write_config "{driver: sim}" "$JOBS}"
 sed -i 's|planner: .*|planner: /nonexistent/planner.yaml|' "$W/scancelld.yaml"
 out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
 [ $rc = 4 ] && echo "$out" | grep -q "planner: no such file" || fail "missing file: exit $rc: $out"
