@@ -86,6 +86,39 @@ class SimHead : public ScanHead {
   dr::SimScanner scanner_;
 };
 
+/// The rough model's unmeasured rows by what keeps a job open: open (seen surface some view of this cell
+/// measures), unmeasurable (no candidate view does), guessed (hypothetical: the rough scan never saw it).
+struct RowTally {
+  std::size_t open = 0, guessed = 0, hypothetical = 0;  // hypothetical: guessed, with the unmeasurable ones
+  double unmeasured_area = 0.0, open_area = 0.0, impossible_area = 0.0, guessed_area = 0.0, hypothetical_area = 0.0;
+};
+
+RowTally tally_unmeasured(const sp::RoughModel& rough, const std::vector<std::uint32_t>& unmeasured,
+                          const std::vector<std::uint32_t>& unmeasurable) {
+  std::vector<std::uint8_t> impossible(rough.size(), 0);
+  for (auto r : unmeasurable) impossible[r] = 1;
+  RowTally t;
+  for (auto r : unmeasured) {
+    const double a = rough.area_mm2[r];
+    const bool guess = !rough.hypothetical.empty() && rough.hypothetical[r];
+    t.unmeasured_area += a;
+    if (guess) {
+      ++t.hypothetical;
+      t.hypothetical_area += a;
+    }
+    if (impossible[r]) {
+      t.impossible_area += a;
+    } else if (guess) {
+      ++t.guessed;
+      t.guessed_area += a;
+    } else {
+      ++t.open;
+      t.open_area += a;
+    }
+  }
+  return t;
+}
+
 /// The journal's record of each view of a plan: pose, scan length, axis targets, planned move and scan times.
 std::vector<std::string> view_records(const sp::ViewPlan& p) {
   std::vector<std::string> out;
@@ -216,36 +249,18 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
   result["views"] = views;
   if (!j.rough_quality.is_null()) result["rough_model"] = j.rough_quality;
   if (j.rough && j.coverage) {
-    double area = 0.0;
-    std::vector<std::uint32_t> rows = j.coverage->unmeasured_rows();
-    for (auto r : rows) area += j.rough->area_mm2[r];
-    std::vector<std::uint8_t> impossible(j.rough->size(), 0);
-    for (auto r : j.unmeasurable) impossible[r] = 1;
-    double open_area = 0.0;
-    std::size_t open = 0;
-    for (auto r : rows)
-      if (!impossible[r] && (j.rough->hypothetical.empty() || !j.rough->hypothetical[r])) {
-        ++open;
-        open_area += j.rough->area_mm2[r];
-      }
+    const std::vector<std::uint32_t> rows = j.coverage->unmeasured_rows();
+    const RowTally t = tally_unmeasured(*j.rough, rows, j.unmeasurable);
     result["rough_area_mm2"] = j.rough->total_area_mm2;
     result["unmeasured_rows"] = rows.size();
-    result["unmeasured_area_mm2"] = area;
+    result["unmeasured_area_mm2"] = t.unmeasured_area;
     result["unmeasurable_rows"] = j.unmeasurable.size();  // no candidate view of this cell measures them
-    result["open_rows"] = open;                          // measurable by the plan's estimate, not measured, seen surface
-    result["open_area_mm2"] = open_area;
+    result["open_rows"] = t.open;                        // measurable by the plan's estimate, not measured, seen surface
+    result["open_area_mm2"] = t.open_area;
     if (!j.rough->hypothetical.empty()) {
-      std::size_t h = 0, h_open = 0;
-      double h_open_area = 0.0;
-      for (std::size_t r = 0; r < j.rough->size(); ++r) h += j.rough->hypothetical[r];
-      for (auto r : rows)
-        if (j.rough->hypothetical[r]) {
-          ++h_open;
-          h_open_area += j.rough->area_mm2[r];
-        }
-      result["hypothetical_rows"] = h;                   // the rough scan's guesses (unseen, closed conservatively)
-      result["hypothetical_unmeasured_rows"] = h_open;   // of those, not measured (incl. unmeasurable)
-      result["hypothetical_unmeasured_area_mm2"] = h_open_area;
+      result["hypothetical_rows"] = std::count(j.rough->hypothetical.begin(), j.rough->hypothetical.end(), 1);  // the rough scan's guesses
+      result["hypothetical_unmeasured_rows"] = t.hypothetical;  // of those, not measured (incl. unmeasurable)
+      result["hypothetical_unmeasured_area_mm2"] = t.hypothetical_area;
     }
     // The unmeasured regions as points (object frame) for a viewer.
     std::filesystem::create_directories(settings_.jobs_dir / std::to_string(j.id));
@@ -446,26 +461,11 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
         }
       }
       transition(j, JobState::verifying);
-      const auto unmeasured = j.coverage->unmeasured_rows();
-      std::vector<std::uint8_t> impossible(j.rough->size(), 0);
-      for (auto r : j.unmeasurable) impossible[r] = 1;
-      std::size_t open = 0, guessed = 0;
-      double open_area = 0.0, impossible_area = 0.0, guessed_area = 0.0;
-      for (auto r : unmeasured) {
-        if (impossible[r]) {
-          impossible_area += j.rough->area_mm2[r];
-          continue;
-        }
-        // A hypothetical row (the rough scan never saw that surface) that views aimed at and did not measure
-        // is most likely not surface at all: the real one lies deeper, and the views measured it instead.
-        if (!j.rough->hypothetical.empty() && j.rough->hypothetical[r]) {
-          ++guessed;
-          guessed_area += j.rough->area_mm2[r];
-          continue;
-        }
-        ++open;
-        open_area += j.rough->area_mm2[r];
-      }
+      // A hypothetical row (the rough scan never saw that surface) that views aimed at and did not measure
+      // is most likely not surface at all: the real one lies deeper, and the views measured it instead.
+      const RowTally t = tally_unmeasured(*j.rough, j.coverage->unmeasured_rows(), j.unmeasurable);
+      const std::size_t open = t.open, guessed = t.guessed;
+      const double open_area = t.open_area, impossible_area = t.impossible_area, guessed_area = t.guessed_area;
       const double total = j.rough->total_area_mm2;
       const std::string summary = "measured " + fmt(j.progress.measured) + " of the rough model; " + std::to_string(open) +
                                   " measurable rows left (" + fmt(open_area, 1) + " mm2), " +

@@ -116,28 +116,23 @@ long ModelCloud::nearest(const Eigen::Vector3d& p, double max_mm) const {
   return static_cast<long>(idx);
 }
 
-void image_points_normals(const RangeImage& img, int stride, std::vector<Eigen::Vector3d>& pts,
-                          std::vector<Eigen::Vector3d>& nrm) {
-  const Eigen::Matrix3d rot = img.pose.camera_to_object.linear();
-  for (int j = 1; j + 1 < img.rows; j += stride)
-    for (int i = 1; i + 1 < img.columns; i += stride) {
-      const RangeSample& s = img.at(i, j);
-      const RangeSample &l = img.at(i - 1, j), &r = img.at(i + 1, j), &d = img.at(i, j - 1), &u = img.at(i, j + 1);
-      if (!s.valid() || !l.valid() || !r.valid() || !d.valid() || !u.valid()) continue;
-      const Eigen::Vector3d a = (r.object_mm - l.object_mm).cast<double>(), b = (u.object_mm - d.object_mm).cast<double>();
-      Eigen::Vector3d n = a.cross(b);
-      // Neighbours across a depth step are not a surface.
-      if (!(n.norm() > 0.0) || a.norm() > 5.0 || b.norm() > 5.0) continue;
-      n.normalize();
-      Eigen::Vector3d to_laser = -s.camera_mm.cast<double>();
-      if (img.kind == SensorKind::line_scan) to_laser.y() = 0.0;
-      if (n.dot(rot * to_laser) < 0.0) n = -n;
-      pts.push_back(s.object_mm.cast<double>());
-      nrm.push_back(n);
-    }
-}
-
 namespace {
+
+/// A sample's surface normal from its four image neighbours, turned towards the laser; zero at the image's
+/// border, next to a missing sample, or across a depth step (a neighbour more than 5 mm away).
+Eigen::Vector3d neighbour_normal(const RangeImage& img, int i, int j) {
+  if (i < 1 || j < 1 || i + 1 >= img.columns || j + 1 >= img.rows) return Eigen::Vector3d::Zero();
+  const RangeSample& s = img.at(i, j);
+  const RangeSample &l = img.at(i - 1, j), &r = img.at(i + 1, j), &d = img.at(i, j - 1), &u = img.at(i, j + 1);
+  if (!s.valid() || !l.valid() || !r.valid() || !d.valid() || !u.valid()) return Eigen::Vector3d::Zero();
+  const Eigen::Vector3d a = (r.object_mm - l.object_mm).cast<double>(), b = (u.object_mm - d.object_mm).cast<double>();
+  Eigen::Vector3d n = a.cross(b);
+  if (!(n.norm() > 0.0) || a.norm() > 5.0 || b.norm() > 5.0) return Eigen::Vector3d::Zero();
+  n.normalize();
+  Eigen::Vector3d to_laser = -s.camera_mm.cast<double>();
+  if (img.kind == SensorKind::line_scan) to_laser.y() = 0.0;
+  return n.dot(img.pose.camera_to_object.linear() * to_laser) < 0.0 ? Eigen::Vector3d(-n) : n;
+}
 
 /// The pivot of a sample: on its profile's boresight (a line scan's profile at its own y), at the image's
 /// mean depth. Turning a profile about any point of its boresight and shifting it is the same family of
@@ -161,37 +156,27 @@ Eigen::Vector3d pivot_of(const RangeImage& img, const RangeSample& s, double dep
 
 }  // namespace
 
+void image_points_normals(const RangeImage& img, int stride, std::vector<Eigen::Vector3d>& pts,
+                          std::vector<Eigen::Vector3d>& nrm) {
+  for (int j = 1; j + 1 < img.rows; j += stride)
+    for (int i = 1; i + 1 < img.columns; i += stride) {
+      const Eigen::Vector3d n = neighbour_normal(img, i, j);
+      if (n.isZero()) continue;
+      pts.push_back(img.at(i, j).object_mm.cast<double>());
+      nrm.push_back(n);
+    }
+}
+
 ScanSamples scan_samples(const RangeImage& img) {
   ScanSamples out;
   const double depth = pivot_depth(img);
-  const Eigen::Matrix3d rot = img.pose.camera_to_object.linear();
-  auto at = [&](int i, int j) -> const RangeSample* {
-    if (i < 0 || j < 0 || i >= img.columns || j >= img.rows) return nullptr;
-    const RangeSample& s = img.at(i, j);
-    return s.valid() ? &s : nullptr;
-  };
   for (int j = 0; j < img.rows; ++j)
     for (int i = 0; i < img.columns; ++i) {
-      const RangeSample* s = at(i, j);
-      if (!s) continue;
-      out.points.push_back(s->object_mm.cast<double>());
-      out.pivots.push_back(pivot_of(img, *s, depth));
-      Eigen::Vector3d n = Eigen::Vector3d::Zero();
-      const RangeSample *l = at(i - 1, j), *r = at(i + 1, j), *d = at(i, j - 1), *u = at(i, j + 1);
-      if (l && r && d && u) {
-        const Eigen::Vector3d a = (r->object_mm - l->object_mm).cast<double>(), b = (u->object_mm - d->object_mm).cast<double>();
-        n = a.cross(b);
-        // Neighbours across a depth step are not a surface.
-        if (n.norm() > 0.0 && a.norm() < 5.0 && b.norm() < 5.0) {
-          n.normalize();
-          Eigen::Vector3d to_laser = -s->camera_mm.cast<double>();
-          if (img.kind == SensorKind::line_scan) to_laser.y() = 0.0;
-          if (n.dot(rot * to_laser) < 0.0) n = -n;
-        } else {
-          n.setZero();
-        }
-      }
-      out.normals.push_back(n);
+      const RangeSample& s = img.at(i, j);
+      if (!s.valid()) continue;
+      out.points.push_back(s.object_mm.cast<double>());
+      out.pivots.push_back(pivot_of(img, s, depth));
+      out.normals.push_back(neighbour_normal(img, i, j));
     }
   return out;
 }
