@@ -179,6 +179,12 @@ can_frame CanOpenAxis::sdo_transfer(std::uint8_t command, std::uint16_t index, s
       if (!link_.receive(r, std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()) + std::chrono::milliseconds(1))) break;
       absorb(r);  // heartbeats and other traffic arrive in between
       if (r.can_id != static_cast<canid_t>(0x580 + cfg_.node_id)) continue;
+      // A reply names its object: one for another request (late, after a retry, or duplicated) is stale. Taken
+      // as the answer, it would shift every later read by one transaction.
+      if (static_cast<std::uint16_t>(r.data[1] | (r.data[2] << 8)) != index || r.data[3] != sub) {
+        ++stale_sdo_replies_;
+        continue;
+      }
       if (r.data[0] == 0x80) fail(DriverError::Kind::exception, where, "SDO abort: " + sdo_abort_text(sdo_value(r)));
       return r;
     }

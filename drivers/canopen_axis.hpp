@@ -6,6 +6,7 @@
 // Frames are struct can_frame read and written on a file descriptor: a SocketCAN raw socket in production
 // (CanLink::open_socketcan), one end of socketpair(AF_UNIX, SOCK_SEQPACKET) in tests (this kernel has no CAN).
 // The driver code is the same for both.
+#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <mutex>
@@ -78,6 +79,8 @@ class CanOpenAxis : public Axis {
   // SDO client, public for diagnostics and tests.
   void sdo_write(std::uint16_t index, std::uint8_t sub, std::uint32_t value, int bytes);
   std::uint32_t sdo_read(std::uint16_t index, std::uint8_t sub);
+  /// SDO replies dropped because they answered another object than the request (late or duplicated).
+  std::uint64_t stale_sdo_replies() const { return stale_sdo_replies_; }
 
  private:
   [[noreturn]] void fail(DriverError::Kind kind, const std::string& where, const std::string& cause);
@@ -98,6 +101,7 @@ class CanOpenAxis : public Axis {
   bool homed_ = false;  // CiA 402 has no homed bit outside homing mode: the driver remembers a completed homing
   std::chrono::steady_clock::time_point last_heartbeat_;
   bool heartbeat_seen_ = false;
+  std::atomic<std::uint64_t> stale_sdo_replies_{0};
 };
 
 }  // namespace scancell::drivers

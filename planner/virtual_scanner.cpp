@@ -315,8 +315,17 @@ RangeImage range_image_from_ply(const std::string& data, const std::string& name
     fail("header lacks one of kind, columns, rows, scan_length_mm, camera_to_object, element vertex");
   if (prop != std::size(kProperties)) fail("header has " + std::to_string(prop) + " of " + std::to_string(std::size(kProperties)) + " properties");
   const std::size_t body = end + std::strlen("end_header\n");
+  // Checked before any multiplication: a count of 2^62 times the record size wraps around 2^64.
+  const std::size_t body_bytes = data.size() - body;
+  const std::size_t max_count = static_cast<std::size_t>(img.columns) * static_cast<std::size_t>(img.rows);
+  if (count > max_count)
+    fail("header: element vertex " + std::to_string(count) + " exceeds the image's " + std::to_string(img.columns) +
+         " x " + std::to_string(img.rows) + " pixels");
+  if (count > body_bytes / kRecordBytes)
+    fail("body has " + std::to_string(body_bytes) + " bytes, too few for " + std::to_string(count) + " samples of " +
+         std::to_string(kRecordBytes) + " bytes (truncated?)");
   const std::size_t expect = count * kRecordBytes;
-  if (data.size() - body != expect)
+  if (body_bytes != expect)
     fail("body has " + std::to_string(data.size() - body) + " bytes, " + std::to_string(count) + " samples need " + std::to_string(expect) + " (truncated?)");
   img.samples.assign(static_cast<std::size_t>(img.columns) * img.rows, RangeSample{});
   const char* p = data.data() + body;

@@ -93,6 +93,10 @@ void Cia402DriveSim::step(double dt) {
 void Cia402DriveSim::reply_sdo(std::uint8_t cmd, std::uint16_t index, std::uint8_t sub, std::uint32_t value) {
   const can_frame f = sdo_frame(static_cast<canid_t>(0x580 + node_), cmd, index, sub, value);
   (void)!::write(fd_, &f, sizeof f);
+  if (fault_ == CanFault::duplicate_reply_once) {
+    fault_ = CanFault::none;
+    (void)!::write(fd_, &f, sizeof f);
+  }
 }
 
 void Cia402DriveSim::on_frame(const can_frame& frame) {

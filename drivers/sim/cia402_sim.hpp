@@ -13,7 +13,8 @@
 
 namespace scancell::drivers::sim {
 
-enum class CanFault { none, sdo_abort_once, missing_heartbeat, drive_fault, following_error, bus_off };
+// duplicate_reply_once: the next SDO reply is sent twice (a late reply after a retry looks the same to the client).
+enum class CanFault { none, sdo_abort_once, missing_heartbeat, drive_fault, following_error, bus_off, duplicate_reply_once };
 
 struct Cia402Params {
   double max_velocity_counts_s = 200000.0;

@@ -76,6 +76,24 @@ TEST(CanOpen, EnableHomeMoveThroughTheCia402StateMachine) {
   EXPECT_EQ(r.drive->limit_violations(), 0u);
 }
 
+// Issue 16, defect 8: a second reply to the position read used to be taken as the answer to the next
+// request, shifting every later read by one (a drive at 50 mm, enabled, read as 0 mm, disabled).
+TEST(CanOpen, AStaleSdoReplyIsDroppedAndCountedNotTakenAsTheAnswer) {
+  Rig r;
+  r.axis->enable();
+  r.axis->home(2000ms);
+  r.axis->move_to(1.5, 3000ms);
+  r.drive->inject(sim::CanFault::duplicate_reply_once);
+  EXPECT_EQ(r.axis->sdo_read(0x6064, 0), 15000u);  // position, answered twice
+  const std::uint32_t sw = r.axis->sdo_read(0x6041, 0);  // the duplicate arrives first and must be skipped
+  EXPECT_NE(sw, 15000u);
+  EXPECT_EQ(sw & 0x6Fu, 0x27u) << std::hex << sw;  // operation enabled
+  EXPECT_EQ(r.axis->stale_sdo_replies(), 1u);
+  const auto s = r.axis->state();
+  EXPECT_TRUE(s.enabled);
+  EXPECT_DOUBLE_EQ(s.position, 1.5);
+}
+
 TEST(CanOpen, SdoAbortIsDecodedAndNamesTheObject) {
   Rig r;
   r.axis->enable();

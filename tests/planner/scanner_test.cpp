@@ -196,6 +196,20 @@ TEST(VirtualScanner, RangeImageFileRoundTripsAndRefusesDamage) {
   std::filesystem::remove_all(dir);
 }
 
+// Issue 16, defect 2: 2^62 samples × 52 bytes wraps to 0 bytes, so an empty body once passed the size check
+// and the reader wrote 2^62 samples into a 16-pixel image. Refused now, naming the count and the image size.
+TEST(VirtualScanner, RangeImageWhoseSampleCountWrapsIsRefused) {
+  const auto file = std::filesystem::path(SCANCELL_SOURCE_DIR) / "tests/data/bad/range-image-count-overflow.ply";
+  try {
+    sp::load_range_image(file);
+    FAIL() << "a range image of 2^62 samples with no body was accepted";
+  } catch (const sp::DataError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("range-image-count-overflow.ply"), std::string::npos) << what;
+    EXPECT_NE(what.find("4611686018427387904 exceeds the image's 4 x 4 pixels"), std::string::npos) << what;
+  }
+}
+
 TEST(VirtualScanner, RandomAccessCameraScansBothAxesOptically) {
   sp::SensorModel s = sp::testing::thesis_sensor();
   s.kind = sp::SensorKind::random_access;
