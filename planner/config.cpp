@@ -157,6 +157,11 @@ PlannerSettings load_planner_settings(const std::filesystem::path& file) {
     if (vs.open_direction_standoffs < 1 || vs.open_direction_standoffs > 16) v.fail(v.key_path("open_direction_standoffs"), "must be in [1, 16]");
     vs.open_directions_per_row = v.get_or<int>("open_directions_per_row", vs.open_directions_per_row);
     if (vs.open_directions_per_row < 1 || vs.open_directions_per_row > 64) v.fail(v.key_path("open_directions_per_row"), "must be in [1, 64]");
+    vs.cell_native = v.get_or<bool>("cell_native", vs.cell_native);
+    vs.cell_oblique_rad = v.get_or<double>("cell_oblique_rad", vs.cell_oblique_rad);
+    if (!(vs.cell_oblique_rad >= 0.0 && vs.cell_oblique_rad <= 0.8)) v.fail(v.key_path("cell_oblique_rad"), "must be in [0, 0.8]");
+    vs.cell_standoff_steps = v.get_or<int>("cell_standoff_steps", vs.cell_standoff_steps);
+    if (vs.cell_standoff_steps < 1 || vs.cell_standoff_steps > 8) v.fail(v.key_path("cell_standoff_steps"), "must be in [1, 8]");
     v.finish();
   }
   if (y.has("cover")) {
@@ -176,6 +181,16 @@ PlannerSettings load_planner_settings(const std::filesystem::path& file) {
     p.cover.exact_time_limit_s = c.get_or<double>("exact_time_limit_s", p.cover.exact_time_limit_s);
     if (!(p.cover.exact_time_limit_s > 0.0 && p.cover.exact_time_limit_s <= 86400.0))
       c.fail(c.key_path("exact_time_limit_s"), "must be in (0, 86400]");
+    p.cover.min_view_gain = c.non_negative("min_view_gain_mm2", p.cover.min_view_gain);
+    if (c.has("local_search_iterations")) {
+      const double it = c.get<double>("local_search_iterations");
+      if (!(it >= 0.0 && it <= 1e9 && it == std::floor(it)))
+        c.fail(c.key_path("local_search_iterations"), "must be a whole number in [0, 1e9], got " + std::to_string(it));
+      p.cover.local_search_iterations = static_cast<std::uint64_t>(it);
+    }
+    p.cover.local_search_time_limit_s = c.get_or<double>("local_search_time_limit_s", p.cover.local_search_time_limit_s);
+    if (!(p.cover.local_search_time_limit_s > 0.0 && p.cover.local_search_time_limit_s <= 3600.0))
+      c.fail(c.key_path("local_search_time_limit_s"), "must be in (0, 3600]");
     c.finish();
   }
   if (y.has("matrix")) {

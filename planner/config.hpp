@@ -18,6 +18,8 @@ struct PlannerSettings {
   /// matrix.countermeasures: auto — size them from the cell's pose-error model (tables 7.3-7.5); needs a cell.
   bool countermeasures_from_cell = false;
   std::uint64_t seed = 1;
+  /// Keep every evaluated candidate in the plan (ViewPlan::candidate_views), for benchmarks and diagnostics.
+  bool keep_candidates = false;
 };
 
 SensorModel load_sensor(const std::filesystem::path& file);

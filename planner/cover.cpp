@@ -194,6 +194,12 @@ CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>
         if (e.gain > 0.0) heap.push(e);
         continue;
       }
+      if (e.gain < st.min_view_gain) {
+        res.stop_reason = "the best remaining view gains under the minimum (cover.min_view_gain_mm2)";
+        heap = {};
+        waiting.clear();
+        break;
+      }
       if (!res.views.empty() && !registers(e.col)) {
         ++res.blocked_by_registration;
         waiting.push_back(e);

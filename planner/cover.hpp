@@ -28,6 +28,14 @@ struct CoverSettings {
   /// registration graph connected when the registration constraint applies.
   bool eliminate_redundant = true;
   double exact_time_limit_s = 10.0;     // exact mode: wall-clock limit of the solver (anytime: best so far)
+  /// Greedy stops when the best remaining view would newly cover less than this much row weight (mm² with
+  /// area weights): the last views of a whole-object cover each chase a sliver the rough model promises and
+  /// the fine surface often does not keep; the closed loop plans for what the executed views leave. 0: off.
+  double min_view_gain = 0.0;
+  /// greedy and constrained modes: swaps of the local search that then looks for a smaller cover
+  /// (local_cover.hpp); 0 keeps greedy's cover. Deterministic: the budget is counted, not timed.
+  std::uint64_t local_search_iterations = 0;
+  double local_search_time_limit_s = 5.0;  // safety cap on the local search's wall-clock time
 };
 
 /// Whether the registration constraint applies: constrained greedy, or exact with t_r > 0.

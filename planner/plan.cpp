@@ -1,7 +1,9 @@
 #include "planner/plan.hpp"
 
+#include "planner/cell_viewpoints.hpp"
 #include "planner/errors.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <array>
@@ -24,11 +26,29 @@ double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock:
 
 nlohmann::json vec(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
 
+/// Greedy's cover, made smaller by the local search when it finds a smaller registered cover of the same rows
+/// (local_cover.hpp); the views are then ordered as greedy would take them.
+void improve_by_local_search(const MeasurabilityMatrix& m, const std::vector<double>& w, ViewPlan& p) {
+  const CoverSettings& st = p.settings.cover;
+  if (st.local_search_iterations == 0 || p.cover.views.size() < 2) return;
+  const auto better = local_search_cover(m, w, st, p.cover.views, st.local_search_iterations,
+                                         st.local_search_time_limit_s, p.settings.seed, &p.local_search);
+  if (better.size() >= p.cover.views.size()) return;
+  CoverResult re = describe_cover(m, w, st, order_by_gain(m, w, st, better));
+  re.blocked_by_registration = p.cover.blocked_by_registration;
+  re.bridge_views = p.cover.bridge_views;
+  re.redundant_removed = p.cover.redundant_removed;
+  re.stop_reason = p.cover.stop_reason + "; local search: " + std::to_string(p.cover.views.size()) + " -> " +
+                   std::to_string(better.size()) + " views";
+  p.cover = std::move(re);
+}
+
 }  // namespace
 
 ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const ModelSpec& spec,
                     const PlannerSettings& settings_in, const RoughModelOptions& rough_options, int threads,
-                    const CellModel* cell_in, const std::vector<std::uint8_t>* measured_rows) {
+                    const CellModel* cell_in, const std::vector<std::uint8_t>* measured_rows,
+                    const std::vector<double>* row_weight_scale) {
   validate(sensor);
   validate(spec);
   ViewPlan p;
@@ -76,6 +96,12 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     if (measured_rows)
       for (std::size_t r = 0; r < row_weight.size(); ++r)
         if ((*measured_rows)[r]) row_weight[r] = 0.0;
+    if (row_weight_scale) {
+      if (row_weight_scale->size() != p.rough.size())
+        throw DataError("replan: " + std::to_string(row_weight_scale->size()) + " row weight factors for a rough model of " +
+                        std::to_string(p.rough.size()) + " rows");
+      for (std::size_t r = 0; r < row_weight.size(); ++r) row_weight[r] *= std::clamp((*row_weight_scale)[r], 0.0, 1.0);
+    }
 
     t = Clock::now();
     // In a cell the fixtures (the turntable plate) occlude too: the underside of an object on the plate is
@@ -85,6 +111,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
 
     t = Clock::now();
     auto candidates = generate_viewpoints(p.rough, scene, sensor, spec, settings.viewpoints, &p.generation);
+    const std::size_t n_zone = candidates.size();  // the optimal-zone candidates (single-best views follow)
     // Thesis 6.3.4: with a segmented rough model, each segment also gets its single-best-view candidates
     // (twist in 90° steps); the cover takes them when one view can do a whole patch.
     if (!p.rough.segment.empty()) {
@@ -127,12 +154,20 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
         if (checker->collides(*reach, v.scan_length_mm)) fate[i] = 3;
       });
       std::vector<Viewpoint> kept;
-      std::set<std::array<long long, 12>> seen;
       for (std::size_t i = 0; i < cands.size(); ++i) {
         p.cell_report.moved += fate[i] == 1;
         p.cell_report.unreachable += fate[i] == 2;
         p.cell_report.colliding += fate[i] == 3;
-        if (fate[i] >= 2) continue;
+        if (fate[i] < 2) kept.push_back(cands[i]);
+      }
+      cands = std::move(kept);
+    };
+    // Poses that coincide (twists that collapse to one reachable pose, seeds that expand alike) are one column.
+    auto merge_duplicates = [&](std::vector<Viewpoint>& cands) {
+      if (!p.cell) return;
+      std::vector<Viewpoint> kept;
+      std::set<std::array<long long, 12>> seen;
+      for (std::size_t i = 0; i < cands.size(); ++i) {
         const Eigen::Matrix4d m = cands[i].transform();
         std::array<long long, 12> key{};
         for (int k = 0; k < 12; ++k)
@@ -145,7 +180,20 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
       }
       cands = std::move(kept);
     };
-    fit_to_cell(candidates);
+    if (p.cell && settings.viewpoints.cell_native && has_cell_native_viewpoints(*p.cell)) {
+      // The cell's own space: each optimal-zone position expanded into the views this cell can take of it
+      // (cell_viewpoints.hpp); the single-best views of segments are projected as before.
+      std::vector<Viewpoint> segment_views(candidates.begin() + static_cast<std::ptrdiff_t>(n_zone), candidates.end());
+      candidates.resize(n_zone);
+      std::vector<Viewpoint> native = cell_viewpoints(p.rough, candidates, sensor, spec, settings.viewpoints, *p.cell,
+                                                      *checker, &p.cell_generation);
+      fit_to_cell(segment_views);
+      native.insert(native.end(), segment_views.begin(), segment_views.end());
+      candidates = std::move(native);
+    } else {
+      fit_to_cell(candidates);
+    }
+    merge_duplicates(candidates);
     p.candidates = candidates.size();
     p.times.viewpoints_s = since(t);
 
@@ -162,6 +210,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
       auto extra = open_direction_viewpoints(p.rough, scene, sensor, spec, settings.viewpoints, unmeasurable, max_rows,
                                              &p.generation.open_direction_rows);
       fit_to_cell(extra);
+      merge_duplicates(extra);
       // These views work far out, near the precision and density limits, where a rough model's averaged
       // normals make the estimate least reliable: their columns claim only rows measured with a margin
       // (a detuned test, thesis 7.4.7; 10 % was the best of 0, 10 and 25 % in bench_quality).
@@ -211,6 +260,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
       p.exact_used = true;
     } else {
       p.cover = greedy_cover(matrix, row_weight, p.settings.cover);
+      improve_by_local_search(matrix, row_weight, p);
     }
     if (p.cell && !p.cover.views.empty()) {
       // Execute in the order that minimises travel from home; the cumulative figures follow that order.
@@ -236,6 +286,16 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
       }
     }
     for (auto j : p.cover.views) p.views.push_back(candidates[j]);
+    {
+      std::vector<std::uint8_t> predicted(p.rough.size(), 0);
+      for (auto j : p.cover.views) matrix.columns[j].for_each([&](std::uint32_t r) { predicted[r] = 1; });
+      for (std::uint32_t r = 0; r < predicted.size(); ++r)
+        if (predicted[r] && !(measured_rows && (*measured_rows)[r])) {
+          p.predicted_rows.push_back(r);
+          p.predicted_gain_mm2 += p.rough.area_mm2[r];
+        }
+    }
+    if (settings.keep_candidates) p.candidate_views = candidates;
     p.times.cover_s = since(t);
   });
   return p;
@@ -282,13 +342,19 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
                      {"bisector_tilt", vs.bisector_tilt},
                      {"open_direction_views", vs.open_direction_views},
                      {"open_direction_standoffs", vs.open_direction_standoffs},
-                     {"open_directions_per_row", vs.open_directions_per_row}}},
+                     {"open_directions_per_row", vs.open_directions_per_row},
+                     {"cell_native", vs.cell_native},
+                     {"cell_oblique_rad", vs.cell_oblique_rad},
+                     {"cell_standoff_steps", vs.cell_standoff_steps}}},
                    {"cover",
                     {{"mode", to_string(p.settings.cover.mode)},
                      {"registration_threshold", p.settings.cover.registration_threshold},
                      {"registration_normalizer", to_string(p.settings.cover.normalizer)},
                      {"eliminate_redundant", p.settings.cover.eliminate_redundant},
-                     {"exact_time_limit_s", p.settings.cover.exact_time_limit_s}}},
+                     {"exact_time_limit_s", p.settings.cover.exact_time_limit_s},
+                     {"min_view_gain_mm2", p.settings.cover.min_view_gain},
+                     {"local_search_iterations", p.settings.cover.local_search_iterations},
+                     {"local_search_time_limit_s", p.settings.cover.local_search_time_limit_s}}},
                    {"matrix", {{"ray_offset_mm", p.settings.matrix.ray_offset_mm}}}};
   Eigen::Matrix4d obj = Eigen::Matrix4d::Identity();
   obj.topLeftCorner<3, 3>() *= p.object.scale;
@@ -417,9 +483,27 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
                             {"candidates_unreachable", p.cell_report.unreachable},
                             {"candidates_colliding", p.cell_report.colliding},
                             {"candidates_merged", p.cell_report.duplicates},
+                            {"cell_native",
+                             {{"seeds", p.cell_generation.seeds},
+                              {"candidates", p.cell_generation.candidates},
+                              {"elevation_clamped", p.cell_generation.clamped},
+                              {"stepped_back", p.cell_generation.stepped_back},
+                              {"unreachable", p.cell_generation.unreachable},
+                              {"colliding", p.cell_generation.colliding}}},
                             {"travel_time_s", p.cell_report.travel_s},
                             {"scan_time_s", p.cell_report.scan_s},
                             {"total_time_s", p.cell_report.travel_s + p.cell_report.scan_s}};
+  }
+  if (p.local_search.start_views > 0) {
+    const LocalSearchReport& ls = p.local_search;
+    j["summary"]["local_search"] = {{"start_views", ls.start_views},
+                                    {"best_views", ls.best_views},
+                                    {"iterations", ls.iterations},
+                                    {"improvements", ls.improvements},
+                                    {"rejected_unregistered", ls.rejected_unregistered},
+                                    {"time_s", ls.seconds},
+                                    // Cut by the clock rather than the swap budget: the cover may depend on the machine.
+                                    {"depends_on_machine_speed", ls.time_limit_hit}};
   }
   if (p.exact_used) {
     const ExactReport& e = p.exact;

@@ -10,9 +10,11 @@
 #include <optional>
 
 #include "planner/cell.hpp"
+#include "planner/cell_viewpoints.hpp"
 #include "planner/config.hpp"
 #include "planner/cover.hpp"
 #include "planner/exact_cover.hpp"
+#include "planner/local_cover.hpp"
 #include "planner/measurability.hpp"
 #include "planner/mesh.hpp"
 #include "planner/rough_model.hpp"
@@ -48,9 +50,14 @@ struct ViewPlan {
   double matrix_density = 0.0;
   std::size_t matrix_bytes = 0;
   std::vector<Viewpoint> views;  // in selection order
+  std::vector<std::uint32_t> predicted_rows;  // rows the chosen views are predicted to measure (not yet measured)
+  double predicted_gain_mm2 = 0.0;            // their area
+  std::vector<Viewpoint> candidate_views;  // every candidate the matrix evaluated (settings.keep_candidates)
   CoverResult cover;
   ExactReport exact;        // filled when settings.cover.mode == exact
+  LocalSearchReport local_search;  // filled when the local search ran (settings.cover.local_search_iterations)
   std::optional<CellModel> cell;  // the cell planned for, with the object's placement on the table
+  CellGenerationReport cell_generation;  // cell-native candidates (cell_viewpoints.hpp), when the cell has them
   struct CellReport {
     std::size_t moved = 0, unreachable = 0, colliding = 0, duplicates = 0;
     double travel_s = 0.0, scan_s = 0.0;
@@ -67,10 +74,14 @@ struct ViewPlan {
 /// object is placed on the table, views are ordered for least travel and carry their axis targets.
 /// Replanning (thesis table 3.1): `measured_rows` (one flag per rough-model row, from MeasuredCoverage on the
 /// same mesh and options, hence the same rough model) removes what the executed views already measured from
-/// the rows to cover; the estimate then refers to the remaining area only.
+/// the rows to cover; the estimate then refers to the remaining area only. `row_weight_scale` (one factor per
+/// row, optional) down-weighs rows in the cover: rows the executed views were predicted to measure and did
+/// not weigh less, so that no view is planned chiefly for them (their gain may fall under
+/// cover.min_view_gain_mm2).
 ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const ModelSpec& spec,
                     const PlannerSettings& settings, const RoughModelOptions& rough_options, int threads = 0,
-                    const CellModel* cell = nullptr, const std::vector<std::uint8_t>* measured_rows = nullptr);
+                    const CellModel* cell = nullptr, const std::vector<std::uint8_t>* measured_rows = nullptr,
+                    const std::vector<double>* row_weight_scale = nullptr);
 
 /// The documented plan file (docs/plan-format.md).
 nlohmann::json plan_to_json(const ViewPlan& plan);

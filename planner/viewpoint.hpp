@@ -67,6 +67,11 @@ struct ViewpointSettings {
   bool open_direction_views = true;
   int open_direction_standoffs = 3;   // stand-off levels between f_d·R_o and the precision-limited range
   int open_directions_per_row = 5;    // open directions kept per targeted row
+  /// Cell-native candidates (cell_viewpoints.hpp): elevation offset of the two oblique views, and how many
+  /// stand-offs (from the optimal zone's out to the precision-limited range) a colliding view may try.
+  bool cell_native = true;             // false: project free candidates onto the cell instead (thesis 6.3.2)
+  double cell_oblique_rad = 0.35;
+  int cell_standoff_steps = 3;
 };
 
 struct GenerationReport {
