@@ -122,6 +122,13 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
     sp::Section s = y.section("jobs");
     c.jobs.max_rounds = s.get_or<int>("max_rounds", c.jobs.max_rounds);
     if (c.jobs.max_rounds < 1 || c.jobs.max_rounds > 50) s.fail(s.key_path("max_rounds"), "must be in [1, 50]");
+    c.jobs.retire_after_failures = s.get_or<int>("retire_after_failures", c.jobs.retire_after_failures);
+    if (c.jobs.retire_after_failures < 1 || c.jobs.retire_after_failures > 10)
+      s.fail(s.key_path("retire_after_failures"), "must be in [1, 10]");
+    c.jobs.failed_row_weight = s.get_or<double>("failed_row_weight", c.jobs.failed_row_weight);
+    if (!(c.jobs.failed_row_weight >= 0.0 && c.jobs.failed_row_weight <= 1.0))
+      s.fail(s.key_path("failed_row_weight"), "must be in [0, 1]");
+    c.jobs.min_gain_per_view_mm2 = s.non_negative("min_gain_per_view_mm2", c.jobs.min_gain_per_view_mm2);
     c.jobs.coverage.row_fraction = s.get_or<double>("row_fraction", c.jobs.coverage.row_fraction);
     if (!(c.jobs.coverage.row_fraction > 0.0 && c.jobs.coverage.row_fraction <= 1.0))
       s.fail(s.key_path("row_fraction"), "must be in (0, 1]");

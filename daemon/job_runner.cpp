@@ -119,6 +119,39 @@ RowTally tally_unmeasured(const sp::RoughModel& rough, const std::vector<std::ui
   return t;
 }
 
+/// The closed loop's evidence: per row, how many executed rounds predicted it measurable while it is still
+/// unmeasured (each round's plan info keeps its predicted rows; what is measured now is the coverage).
+std::vector<std::uint8_t> failure_counts(const std::vector<json>& round_infos, const std::vector<std::uint8_t>& measured) {
+  std::vector<std::uint8_t> fails(measured.size(), 0);
+  for (const auto& info : round_infos) {
+    if (!info.contains("predicted_rows")) continue;
+    for (const auto& r : info.at("predicted_rows")) {
+      const auto row = r.get<std::size_t>();
+      if (row < fails.size() && !measured[row] && fails[row] < 255) ++fails[row];
+    }
+  }
+  return fails;
+}
+
+/// Each executed round's predicted and realized gain (mm²): realized is what the measured coverage rose by
+/// from the round's start to the next round's start (or to `measured_now` for the last).
+json round_gains(const std::vector<json>& round_infos, double measured_now, double total_mm2) {
+  json out = json::array();
+  for (std::size_t k = 0; k < round_infos.size(); ++k) {
+    const json& info = round_infos[k];
+    const double before = info.value("measured_before", 0.0);
+    const double after = k + 1 < round_infos.size() ? round_infos[k + 1].value("measured_before", measured_now) : measured_now;
+    const double predicted = info.value("predicted_gain_mm2", 0.0), realized = (after - before) * total_mm2;
+    out.push_back({{"round", info.value("round", static_cast<int>(k))},
+                   {"views", info.value("views", 0)},
+                   {"predicted_gain_mm2", predicted},
+                   {"realized_gain_mm2", realized},
+                   {"realized_share", predicted > 0.0 ? realized / predicted : 0.0},
+                   {"under_20_percent", predicted > 0.0 && realized < 0.2 * predicted}});
+  }
+  return out;
+}
+
 /// The journal's record of each view of a plan: pose, scan length, axis targets, planned move and scan times.
 std::vector<std::string> view_records(const sp::ViewPlan& p) {
   std::vector<std::string> out;
@@ -273,6 +306,39 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
       f << p.x() << ' ' << p.y() << ' ' << p.z() << ' ' << n.x() << ' ' << n.y() << ' ' << n.z() << ' ' << j.rough->area_mm2[r] << "\n";
     }
     result["unmeasured_file"] = path.string();
+    // The closed loop's account: what each round predicted and delivered, and the rows it gave up on.
+    std::vector<json> infos;
+    for (const auto& [plan, round] : journal_.plan_rounds(j.id))
+      if (round >= 0) infos.push_back(json::parse(journal_.plan_info(plan)));
+    if (!infos.empty()) {
+      const json gains = round_gains(infos, j.progress.measured, j.rough->total_area_mm2);
+      json weak = json::array();
+      for (const auto& g : gains)
+        if (g.at("under_20_percent").get<bool>()) weak.push_back(g.at("round"));
+      result["round_gains"] = gains;
+      result["rounds_under_20_percent"] = weak;  // realized under 20 % of the predicted gain
+      std::vector<std::uint8_t> measured = j.coverage->measured_rows();
+      for (auto r : j.unmeasurable) measured[r] = 1;
+      const auto fails = failure_counts(infos, measured);
+      std::size_t n = 0;
+      double area = 0.0;
+      const auto attention = settings_.jobs_dir / std::to_string(j.id) / "needs_attention.xyz";
+      std::ofstream fa(attention);
+      fa << "# rows predicted measurable by " << settings_.retire_after_failures
+         << " or more executed rounds and still unmeasured: x y z (mm, object frame) nx ny nz area_mm2 rounds_failed\n";
+      for (std::size_t r = 0; r < fails.size(); ++r)
+        if (fails[r] >= settings_.retire_after_failures) {
+          ++n;
+          area += j.rough->area_mm2[r];
+          const auto& p = j.rough->points[r];
+          const auto& nn = j.rough->normals[r];
+          fa << p.x() << ' ' << p.y() << ' ' << p.z() << ' ' << nn.x() << ' ' << nn.y() << ' ' << nn.z() << ' '
+             << j.rough->area_mm2[r] << ' ' << int(fails[r]) << "\n";
+        }
+      result["needs_attention_rows"] = n;
+      result["needs_attention_area_mm2"] = area;
+      result["needs_attention_file"] = attention.string();
+    }
   }
   // Simulation: the same coverage of the rough model from where the samples really are (the simulator's
   // ground-truth hit points), counting only samples the daemon stored within 3 × the precision spec of the
@@ -381,6 +447,9 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
                          {"estimated", est},
                          {"unmeasurable_rows", j.unmeasurable},
                          {"candidates", p.candidates},
+                         {"views", p.views.size()},
+                         {"predicted_rows", p.predicted_rows},
+                         {"predicted_gain_mm2", p.predicted_gain_mm2},
                          {"plan_s", p.times.total_s()}};
       if (p.views.empty()) {
         j.cell = *p.cell;
@@ -461,6 +530,30 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
         }
       }
       transition(j, JobState::verifying);
+      std::vector<json> infos;
+      for (auto pl : plans) infos.push_back(json::parse(journal_.plan_info(pl)));
+      const double total_mm2 = j.rough->total_area_mm2;
+      {
+        const json g = round_gains(infos, j.progress.measured, total_mm2).back();
+        journal_.event(id, "round " + std::to_string(j.round) + ": " + std::to_string(views.size()) + " views, predicted gain " +
+                               fmt(g.at("predicted_gain_mm2").get<double>(), 1) + " mm2, realized " +
+                               fmt(g.at("realized_gain_mm2").get<double>(), 1) + " mm2" +
+                               (g.at("under_20_percent").get<bool>() ? " (under 20 % of the prediction)" : ""));
+      }
+      // Rows the executed rounds were predicted to measure and did not: retired after
+      // jobs.retire_after_failures such rounds (needs attention), down-weighted before.
+      std::vector<std::uint8_t> measured_now = j.coverage->measured_rows();
+      for (auto r : j.unmeasurable) measured_now[r] = 1;
+      const std::vector<std::uint8_t> fails = failure_counts(infos, measured_now);
+      std::vector<std::uint8_t> retired(fails.size(), 0);
+      std::size_t n_retired = 0;
+      double retired_area = 0.0;
+      for (std::size_t r = 0; r < fails.size(); ++r)
+        if (fails[r] >= settings_.retire_after_failures) {
+          retired[r] = 1;
+          ++n_retired;
+          retired_area += j.rough->area_mm2[r];
+        }
       // A hypothetical row (the rough scan never saw that surface) that views aimed at and did not measure
       // is most likely not surface at all: the real one lies deeper, and the views measured it instead.
       const RowTally t = tally_unmeasured(*j.rough, j.coverage->unmeasured_rows(), j.unmeasurable);
@@ -478,6 +571,15 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
         finish(j, JobState::done, "spec met: " + summary);
         return JobState::done;
       }
+      std::size_t open_retired = 0;
+      for (auto r : j.coverage->unmeasured_rows())
+        open_retired += retired[r] && (j.rough->hypothetical.empty() || !j.rough->hypothetical[r]);
+      if (open_retired == open && (guessed == 0 || j.round >= 1)) {
+        finish(j, JobState::stalled, std::to_string(n_retired) + " rows (" + fmt(retired_area, 1) + " mm2) need attention: " +
+                                         std::to_string(settings_.retire_after_failures) +
+                                         " rounds predicted them measurable and did not measure them; " + summary);
+        return JobState::stalled;
+      }
       if (j.round + 1 >= settings_.max_rounds) {
         finish(j, JobState::stalled, "after " + std::to_string(j.round + 1) + " rounds: " + summary);
         return JobState::stalled;
@@ -491,12 +593,25 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
       // Later rounds go after the leftovers only; their views register to the model through the rows they
       // share with it, not through each other, so the between-view registration constraint is dropped.
       if (replan.cover.mode == sp::CoverMode::constrained) replan.cover.mode = sp::CoverMode::greedy;
-      auto measured = j.coverage->measured_rows();
-      for (auto r : j.unmeasurable) measured[r] = 1;  // nothing can measure them: do not chase them
+      // Nothing can measure the unmeasurable rows and the retired ones failed too often: neither is chased.
+      // A row that failed once weighs less, so no view is planned chiefly for it.
+      std::vector<std::uint8_t> measured = measured_now;
+      std::vector<double> weight_scale(measured.size(), 1.0);
+      for (std::size_t r = 0; r < measured.size(); ++r) {
+        if (retired[r]) measured[r] = 1;
+        else if (fails[r] > 0) weight_scale[r] = settings_.failed_row_weight;
+      }
       sp::ViewPlan p = sp::plan_views(j.object, models_.sensor, j.spec, replan, j.rough_options, settings_.planner_threads,
-                                      &models_.cell, &measured);
+                                      &models_.cell, &measured, &weight_scale);
       if (p.views.empty()) {
         finish(j, JobState::stalled, "replan adds nothing: " + summary);
+        return JobState::stalled;
+      }
+      const double gain_per_view = p.predicted_gain_mm2 / static_cast<double>(p.views.size());
+      if (gain_per_view < settings_.min_gain_per_view_mm2) {
+        finish(j, JobState::stalled, "the next round would gain " + fmt(gain_per_view, 2) + " mm2 per view (" +
+                                         std::to_string(p.views.size()) + " views), under jobs.min_gain_per_view_mm2 " +
+                                         fmt(settings_.min_gain_per_view_mm2, 1) + ": " + summary);
         return JobState::stalled;
       }
       const std::vector<std::string> poses = view_records(p);
@@ -509,6 +624,10 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
                           {"estimated_total", j.progress.measured + est_rest * rest_area / total},
                           {"measured_before", j.progress.measured},
                           {"candidates", p.candidates},
+                          {"views", p.views.size()},
+                          {"predicted_rows", p.predicted_rows},
+                          {"predicted_gain_mm2", p.predicted_gain_mm2},
+                          {"retired_rows", n_retired},
                           {"plan_s", p.times.total_s()}};
       journal_.add_plan(id, j.round + 1, poses, rinfo.dump());
       plans = round_plans();

@@ -69,6 +69,13 @@ std::unique_ptr<ScanHead> make_sim_head(const planner::SensorModel& sensor, cons
 
 struct JobSettings {
   int max_rounds = 4;                              // plan rounds before a job that still lacks rows stalls
+  /// The closed loop's evidence (issue 15): a row a round's views were predicted to measure and did not is
+  /// down-weighted for the next plan (failed once) and, after `retire_after_failures` such rounds, retired:
+  /// reported as needing attention, never chased again. A replan whose predicted gain per view is under
+  /// `min_gain_per_view_mm2` is not executed: the job stops there.
+  int retire_after_failures = 2;
+  double failed_row_weight = 0.25;
+  double min_gain_per_view_mm2 = 5.0;
   planner::CoverageOptions coverage;               // when a rough-model row counts as measured
   std::chrono::milliseconds move_timeout{60000};   // one positioning move
   double scan_speed_mm_s = 0.0;                    // sweep speed; 0: the cell's scan_speed_mm_s

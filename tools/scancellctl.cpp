@@ -116,6 +116,16 @@ void print_result(const json& reply, double seconds) {
     std::printf("  %-34s %.4f  (against %s)\n", "verified m_v (ground truth)", num("verified_mv"), r["verified_against"].get<std::string>().c_str());
   std::printf("  %-34s %.1f mm2 in %d rows\n", "not measured, measurable", num("open_area_mm2"), r.value("open_rows", 0));
   std::printf("  %-34s %d rows\n", "unmeasurable in this cell", r.value("unmeasurable_rows", 0));
+  if (r.contains("needs_attention_rows"))
+    std::printf("  %-34s %.1f mm2 in %d rows (predicted measurable, not measured, twice)\n", "needs attention",
+                num("needs_attention_area_mm2"), r.value("needs_attention_rows", 0));
+  if (r.contains("round_gains")) {
+    std::printf("  %-34s", "gain per round, predicted/realized");
+    for (const auto& g : r["round_gains"])
+      std::printf(" %d: %.0f/%.0f mm2%s", g.value("round", 0), g.value("predicted_gain_mm2", 0.0), g.value("realized_gain_mm2", 0.0),
+                  g.value("under_20_percent", false) ? " (under 20 %)" : "");
+    std::printf("\n");
+  }
   if (seconds > 0.0) std::printf("  %-34s %.1f s\n", "watched for", seconds);
   if (r.contains("coverage_png")) std::printf("  %-34s %s\n", "coverage picture", r["coverage_png"].get<std::string>().c_str());
   if (r.contains("unmeasured_file")) std::printf("  %-34s %s\n", "unmeasured rows", r["unmeasured_file"].get<std::string>().c_str());

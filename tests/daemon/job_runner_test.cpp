@@ -5,6 +5,7 @@
 #include <fstream>
 #include <iostream>
 #include <optional>
+#include <sstream>
 #include <thread>
 
 #include <gmock/gmock.h>
@@ -74,7 +75,7 @@ struct SimCell : ::testing::Test {
     bring_up(*io, models.cell, 10000ms);
     journal = std::make_unique<Journal>(dir / "data");
   }
-  void TearDown() override { fs::remove_all(dir); }
+  void TearDown() override { if (!std::getenv("KEEPDIR")) fs::remove_all(dir); }
 
   std::optional<SimTruth> truth;
   bool register_views = true;
@@ -143,14 +144,71 @@ TEST_F(SimCell, CubeJobMeasuresEverythingTheCellCanMeasure) {
   EXPECT_LT(at("planning"), at("executing"));
   EXPECT_LT(at("executing"), at("verifying"));
   EXPECT_LT(at("verifying"), at("done"));
-  // A stored scan is a range image whose samples lie on the cube (object frame, placed on the plate).
-  const auto scans = journal->scans(journal->plans(job).front());
-  const sp::RangeImage img = sp::range_image_from_ply(journal->read_scan(scans.front()), scans.front().file);
-  std::size_t on_cube = 0;
-  for (const auto& s : img.samples)
-    if (s.valid()) on_cube += (s.object_mm.array() > -0.5f).all() && (s.object_mm.array() < 50.5f).all();
-  EXPECT_GT(on_cube, 0.99 * static_cast<double>(img.valid_count()));
-  EXPECT_GT(img.valid_count(), 10000u);
+  // Every stored scan is a range image whose samples lie on the cube (object frame, placed on the plate); the
+  // fullest holds a large part of a face (which view comes first depends on the travel order).
+  std::size_t fullest = 0;
+  for (const auto& scan : journal->scans(journal->plans(job).front())) {
+    const sp::RangeImage img = sp::range_image_from_ply(journal->read_scan(scan), scan.file);
+    std::size_t on_cube = 0;
+    for (const auto& s : img.samples)
+      if (s.valid()) on_cube += (s.object_mm.array() > -0.5f).all() && (s.object_mm.array() < 50.5f).all();
+    EXPECT_GT(on_cube, 0.99 * static_cast<double>(img.valid_count())) << scan.file;
+    fullest = std::max(fullest, img.valid_count());
+  }
+  EXPECT_GT(fullest, 10000u);
+}
+
+// Issue 15, the closed loop: the submitted mesh has a block on top that the real object lacks. Every round
+// predicts the block's rows measurable and none is ever measured. The loop must not chase them round after
+// round to jobs.max_rounds: after two rounds they are retired as needing attention, the rounds that
+// delivered under 20 % of their prediction are named, and the job stops.
+TEST_F(SimCell, RowsPredictedTwiceAndNeverMeasuredAreRetiredNotChased) {
+  sp::TriangleMesh phantom;
+  const sp::TriangleMesh cube = sp::load_mesh(write_cube(dir));
+  sp::TriangleMesh block;
+  block.vertices = {{15, 15, 50}, {35, 15, 50}, {35, 35, 50}, {15, 35, 50}, {15, 15, 75}, {35, 15, 75}, {35, 35, 75}, {15, 35, 75}};
+  block.triangles = {{0, 2, 1}, {0, 3, 2}, {4, 5, 6}, {4, 6, 7}, {0, 1, 5}, {0, 5, 4},
+                     {1, 2, 6}, {1, 6, 5}, {2, 3, 7}, {2, 7, 6}, {3, 0, 4}, {3, 4, 7}};
+  phantom = cube;
+  sp::append_mesh(phantom, sp::refine_edges(block, 6.0));
+  sp::write_off(phantom, (dir / "phantom.off").string());
+  max_rounds = 6;
+  JobRequest req;
+  req.mesh = (dir / "phantom.off").string();
+  req.truth = (dir / "cube.off").string();
+  req.rough_vertices = 600;
+  validate_request(req);
+  const auto job = journal->create_job(req.mesh, req.to_json().dump());
+  std::atomic<int> stop{0};
+  auto r = runner();
+  EXPECT_EQ(r.run(job, stop), JobState::stalled) << journal->job(job).cause;
+  const auto result = nlohmann::json::parse(journal->job(job).result_json);
+  for (const auto& e : journal->events(job))
+    if (e.rfind("round ", 0) == 0 || e.rfind("stalled", 0) == 0) std::cout << e << "\n";
+  EXPECT_LT(result["rounds"].get<int>(), 6);  // stopped before max_rounds
+  EXPECT_GT(result["needs_attention_rows"].get<int>(), 0);
+  // What needs attention is chiefly the block that is not there (a sliver of the real walls at the plate,
+  // which the rough model promises and no view delivers, may join it).
+  std::ifstream f(result["needs_attention_file"].get<std::string>());
+  std::string line;
+  std::size_t rows = 0, on_block = 0;
+  double area = 0.0, block_area = 0.0;
+  while (std::getline(f, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream ls(line);
+    double x, y, z, nx, ny, nz, a;
+    ls >> x >> y >> z >> nx >> ny >> nz >> a;
+    ++rows;
+    area += a;
+    if (z > 49.0 && x > 13 && x < 37 && y > 13 && y < 37) ++on_block, block_area += a;
+  }
+  EXPECT_EQ(rows, result["needs_attention_rows"].get<std::size_t>());
+  EXPECT_GE(on_block, 8u);
+  EXPECT_GT(block_area, 0.8 * area);
+  EXPECT_NEAR(area, result["needs_attention_area_mm2"].get<double>(), 1e-6 * area + 1e-9);
+  EXPECT_FALSE(result["rounds_under_20_percent"].empty());
+  ASSERT_EQ(result["round_gains"].size(), static_cast<std::size_t>(result["rounds"].get<int>()));
+  EXPECT_GT(result["round_gains"][0]["realized_gain_mm2"].get<double>(), 5000.0);  // the cube's walls and top
 }
 
 TEST_F(SimCell, DriveFaultFaultsTheJobAndResumeFinishesWithoutRepeatingAView) {
