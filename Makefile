@@ -5,7 +5,7 @@ JOBS       ?= $(shell nproc)
 CMAKE      ?= cmake
 SCANCELL    = $(BUILD)/tools/scancell
 
-.PHONY: all deps build test test-asan demo demo-rough demo-offline kill-test bench quality clean
+.PHONY: all deps build test test-asan demo demo-rough demo-offline kill-test bench quality quality-cell clean
 
 all: build
 
@@ -56,6 +56,10 @@ bench: build
 # Plan quality against turntable programs and a view sphere, verified by the virtual scanner (docs/quality.md).
 quality: build
 	cd $(BUILD) && ./bench/bench_quality --csv quality.csv
+
+# Plans against an oracle in the same configuration space, free space and the turntable cell (bench/bench_cell.cpp).
+quality-cell: build
+	cd $(BUILD) && ./bench/bench_cell --csv quality-cell.csv
 
 clean:
 	rm -rf $(BUILD) $(ASAN_BUILD) $(BUILD).configure.log $(ASAN_BUILD).configure.log

@@ -2,16 +2,21 @@
 // densities 0.24 and 0.64, random and spatially correlated), and on a whole-object matrix. Prints, per
 // instance, greedy's views (before/after redundancy elimination), the exact cover, the proven bound, the gap,
 // the solver status and time, and e_v = n_best / n (thesis 1.3) of greedy against the proven bound.
-//   bench_cover [--time-limit S] [--mesh FILE] [--skip-object]
+//   bench_cover [--time-limit S] [--mesh FILE] [--skip-object] [--all-objects] [--no-exact]
+// --all-objects: every mesh beside --mesh (shared/meshes) as a whole object; --no-exact: greedy and the local
+// search only (each instance also reports the local search from constrained greedy's cover).
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <random>
 #include <string>
 
 #include "planner/config.hpp"
 #include "planner/exact_cover.hpp"
+#include "planner/local_cover.hpp"
 #include "planner/plan.hpp"
 #include "planner/synthetic.hpp"
 
@@ -54,6 +59,8 @@ PatchInstance patch_matrix(const sp::TriangleMesh& fine, std::size_t rough_verti
   return {sp::build_measurability(rm, scene, s, spec, cands), rm.area_mm2};
 }
 
+bool g_exact = true;
+
 void run(const char* name, const sp::MeasurabilityMatrix& m, const std::vector<double>& w, double t_r, double limit) {
   sp::CoverSettings g;
   g.mode = t_r > 0.0 ? sp::CoverMode::constrained : sp::CoverMode::greedy;
@@ -62,8 +69,16 @@ void run(const char* name, const sp::MeasurabilityMatrix& m, const std::vector<d
   const auto t0 = Clock::now();
   const std::size_t n_greedy = sp::greedy_cover(m, w, g).views.size();
   g.eliminate_redundant = true;
-  const std::size_t n_lean = sp::greedy_cover(m, w, g).views.size();
+  const auto lean = sp::greedy_cover(m, w, g).views;
+  const std::size_t n_lean = lean.size();
   const double greedy_s = std::chrono::duration<double>(Clock::now() - t0).count();
+  // The local search from constrained greedy's (redundancy-eliminated) cover, as the planner runs it.
+  sp::LocalSearchReport ls;
+  const std::size_t n_local = sp::local_search_cover(m, w, g, lean, 20000, 60.0, 1, &ls).size();
+  std::printf("%-28s   local search: %zu -> %zu views (%.1f %% fewer) in %.2f s, %llu swaps\n", name, n_lean, n_local,
+              100.0 * (1.0 - double(n_local) / double(std::max<std::size_t>(1, n_lean))), ls.seconds,
+              static_cast<unsigned long long>(ls.iterations));
+  if (!g_exact) return;
   sp::CoverSettings e = g;
   e.mode = sp::CoverMode::exact;
   e.exact_time_limit_s = limit;
@@ -85,14 +100,16 @@ void run(const char* name, const sp::MeasurabilityMatrix& m, const std::vector<d
 
 int main(int argc, char** argv) {
   double limit = 10.0;
-  bool object = true;
+  bool object = true, all_objects = false;
   std::string mesh_path = std::string(SCANCELL_SOURCE_DIR) + "/../shared/meshes/bunny00.off";
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--time-limit") && i + 1 < argc) limit = std::atof(argv[++i]);
     else if (!std::strcmp(argv[i], "--mesh") && i + 1 < argc) mesh_path = argv[++i];
     else if (!std::strcmp(argv[i], "--skip-object")) object = false;
+    else if (!std::strcmp(argv[i], "--no-exact")) g_exact = false;
+    else if (!std::strcmp(argv[i], "--all-objects")) all_objects = true;
     else {
-      std::fprintf(stderr, "usage: bench_cover [--time-limit S] [--mesh FILE] [--skip-object]\n");
+      std::fprintf(stderr, "usage: bench_cover [--time-limit S] [--mesh FILE] [--skip-object] [--all-objects] [--no-exact]\n");
       return 2;
     }
   }
@@ -117,9 +134,17 @@ int main(int argc, char** argv) {
     run(name, cav.m, cav.w, 0.0, limit);
     run(name, cav.m, cav.w, 0.1, limit);
   }
-  if (object) {
+  std::vector<std::string> object_paths;
+  if (object) object_paths.push_back(mesh_path);
+  if (all_objects) {
+    object_paths.clear();
+    for (const auto& e : std::filesystem::directory_iterator(std::filesystem::path(mesh_path).parent_path()))
+      if (e.path().extension() == ".off") object_paths.push_back(e.path().string());
+    std::sort(object_paths.begin(), object_paths.end());
+  }
+  for (const auto& path : object_paths) {
     // A whole object, planned as scancell plans it (DECOUPLED, tilts, open-direction views), 5000 rough rows.
-    sp::TriangleMesh mesh = sp::load_mesh(mesh_path);
+    sp::TriangleMesh mesh = sp::load_mesh(path);
     sp::apply_scale(mesh, sp::fit_scale(mesh, 200.0));
     sp::RoughModelOptions ro;
     ro.target_vertices = 5000;
@@ -129,8 +154,9 @@ int main(int argc, char** argv) {
     vs.position_decimation = 8;
     const auto cands = sp::generate_viewpoints(rm, scene, s, spec, vs);
     const auto m = sp::build_measurability(rm, scene, s, spec, cands);
-    run("bunny 200 mm, whole object", m, rm.area_mm2, 0.0, limit);
-    run("bunny 200 mm, whole object", m, rm.area_mm2, 0.1, limit);
+    const std::string name = std::filesystem::path(path).stem().string() + " 200 mm, whole";
+    run(name.c_str(), m, rm.area_mm2, 0.0, limit);
+    run(name.c_str(), m, rm.area_mm2, 0.1, limit);
   }
   return 0;
 }

@@ -1,5 +1,7 @@
 #include "planner/cover.hpp"
 
+#include "planner/union_find.hpp"
+
 #include <algorithm>
 #include <numeric>
 #include <queue>
@@ -16,16 +18,6 @@ struct Entry {
     if (gain != o.gain) return gain < o.gain;
     return col > o.col;
   }
-};
-
-struct UnionFind {
-  std::vector<std::uint32_t> p;
-  explicit UnionFind(std::size_t n) : p(n) { std::iota(p.begin(), p.end(), 0u); }
-  std::uint32_t find(std::uint32_t x) {
-    while (p[x] != x) x = p[x] = p[p[x]];
-    return x;
-  }
-  void unite(std::uint32_t a, std::uint32_t b) { p[find(a)] = find(b); }
 };
 
 /// The rows no column measures and the measurable share of the weight (both results report them).

@@ -1,4 +1,5 @@
 #include "planner/local_cover.hpp"
+#include "planner/union_find.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -40,16 +41,6 @@ RowIndex index_rows(const MeasurabilityMatrix& m, const std::vector<double>& w) 
     });
   return ix;
 }
-
-struct UnionFind {
-  std::vector<std::uint32_t> p;
-  explicit UnionFind(std::size_t n) : p(n) { std::iota(p.begin(), p.end(), 0u); }
-  std::uint32_t find(std::uint32_t x) {
-    while (p[x] != x) x = p[x] = p[p[x]];
-    return x;
-  }
-  void unite(std::uint32_t a, std::uint32_t b) { p[find(a)] = find(b); }
-};
 
 /// The registration graph of a set of views, its overlaps counted through the row index (every row a view
 /// shares with another is visited once per pair sharing it).
