@@ -35,6 +35,9 @@ std::string absolute_file(const json& req, const char* key) {
 }  // namespace
 
 Daemon::Daemon(DaemonConfig config) : config_(std::move(config)) {
+  // Before anything touches the journal, the drives or the socket: a second daemon must not.
+  data_lock_ = std::make_unique<InstanceLock>(config_.data_dir / "scancelld.lock");
+  socket_lock_ = std::make_unique<InstanceLock>(config_.socket_path.string() + ".lock");
   journal_ = std::make_unique<Journal>(config_.data_dir);
   telemetry_ = std::make_unique<Telemetry>(config_.lcm_url);
   io_ = open_cell_io(config_.models.cell, config_.drivers, config_.drivers_file.string());

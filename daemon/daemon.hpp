@@ -13,6 +13,7 @@
 #include "daemon/cell_io.hpp"
 #include "daemon/control.hpp"
 #include "daemon/daemon_config.hpp"
+#include "daemon/instance_lock.hpp"
 #include "daemon/journal.hpp"
 #include "daemon/notify.hpp"
 #include "daemon/telemetry.hpp"
@@ -43,6 +44,7 @@ class Daemon {
 
   DaemonConfig config_;
   std::mutex config_mu_;  // models are copied per job; SIGHUP changes them for the next job
+  std::unique_ptr<InstanceLock> data_lock_, socket_lock_;  // first taken, last released
   std::unique_ptr<Journal> journal_;
   std::unique_ptr<Telemetry> telemetry_;
   std::mutex telemetry_mu_;

@@ -47,6 +47,12 @@ for _ in $(seq 400); do [ -S "$W/control.sock" ] && break; sleep 0.025; done
 [ -S "$W/control.sock" ] || fail "daemon did not start"
 [ "$(stat -c %a "$W/control.sock")" = 660 ] || fail "socket mode $(stat -c %a "$W/control.sock")"
 
+# 2b. A second daemon on the same data directory (and socket) is refused, naming the running one's PID, and
+# leaves it serving (issue 16, defect 6: it used to take over the socket and home the drives mid-sweep).
+out=$(timeout 10 "$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
+[ $rc = 1 ] && echo "$out" | grep -q "in use by another scancelld (PID $DAEMON_PID" || fail "second daemon: exit $rc: $out"
+[ -S "$W/control.sock" ] || fail "the second daemon removed the first one's socket"
+
 # 3. Bad requests are refused with a reason; the daemon keeps serving.
 out=$(ctl submit --mesh "$SRC/tests/data/bad/empty.stl" 2>&1); rc=$?
 [ $rc = 1 ] && echo "$out" | grep -q "empty.stl" || fail "bad mesh: exit $rc: $out"
