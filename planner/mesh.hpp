@@ -2,6 +2,7 @@
 // Indexed triangle meshes: loading (assimp) with strict validation, scaling, welding.
 #include <array>
 #include <cstdint>
+#include <chrono>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -27,8 +28,11 @@ struct MeshLoadReport {
 
 /// Reads OFF, PLY, OBJ or STL through assimp. Throws MeshError naming the file and the offending element for
 /// empty or unparseable files, non-finite coordinates, out-of-range indices and meshes without usable
-/// triangles. Degenerate triangles are dropped and counted in the report.
-TriangleMesh load_mesh(const std::filesystem::path& path, MeshLoadReport* report = nullptr);
+/// triangles. Degenerate triangles are dropped and counted in the report. The file is parsed in a child
+/// process that is stopped after `time_limit` (a malformed file can make a parser loop or crash; the caller
+/// gets a MeshError naming the file either way).
+TriangleMesh load_mesh(const std::filesystem::path& path, MeshLoadReport* report = nullptr,
+                       std::chrono::milliseconds time_limit = std::chrono::milliseconds(30000));
 
 /// Validates an in-memory mesh with the same rules (name is used in messages); drops degenerate triangles.
 void validate_mesh(TriangleMesh& mesh, const std::string& name, MeshLoadReport* report = nullptr);

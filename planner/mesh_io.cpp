@@ -8,7 +8,15 @@
 #include <unordered_map>
 
 #include <fstream>
-#include <mutex>
+#include <chrono>
+#include <cerrno>
+#include <cstring>
+
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <assimp/DefaultLogger.hpp>
 #include <assimp/Importer.hpp>
@@ -47,12 +55,6 @@ class ErrorCollector : public Assimp::LogStream {
   std::string first;
 };
 
-/// Assimp's logger is process-global; one import at a time owns it.
-std::mutex& importer_mutex() {
-  static std::mutex m;
-  return m;
-}
-
 /// Assimp's text parsers read "nan" as 0 without a word. A text mesh file must not hold a token that parses
 /// as a non-finite number (nan, inf, 1e999); binary files (any NUL or control byte) are checked after
 /// import instead.
@@ -90,17 +92,10 @@ void refuse_non_finite_tokens(const std::string& name) {
 
 }  // namespace
 
-TriangleMesh load_mesh(const std::filesystem::path& path, MeshLoadReport* report) {
-  const std::string name = path.string();
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec))
-    throw MeshError(name + ": no such mesh file");
-  if (std::filesystem::file_size(path, ec) == 0)
-    throw MeshError(name + ": file is empty");
+namespace {
 
-  refuse_non_finite_tokens(name);
-
-  std::lock_guard<std::mutex> lock(importer_mutex());
+/// The import itself (assimp), no locking: the caller owns assimp's process-global logger.
+TriangleMesh import_mesh(const std::string& name, MeshLoadReport* report) {
   Assimp::DefaultLogger::create("", Assimp::Logger::NORMAL, 0);
   ErrorCollector* errors = new ErrorCollector;  // owned by the logger once attached
   Assimp::DefaultLogger::get()->attachStream(errors, Assimp::Logger::Err);
@@ -157,6 +152,130 @@ TriangleMesh load_mesh(const std::filesystem::path& path, MeshLoadReport* report
     }
   }
   validate_mesh(mesh, name, &local);
+  if (report) *report = local;
+  return mesh;
+}
+
+template <class T>
+void put(std::string& out, const T& v) {
+  out.append(reinterpret_cast<const char*>(&v), sizeof v);
+}
+template <class T>
+T get(const std::string& in, std::size_t& at) {
+  if (at + sizeof(T) > in.size()) throw MeshError("mesh reader: truncated reply");
+  T v;
+  std::memcpy(&v, in.data() + at, sizeof v);
+  at += sizeof v;
+  return v;
+}
+
+/// Child side: the import's outcome as bytes (status 0 + report + mesh, or status 1 + the message).
+std::string import_to_bytes(const std::string& name) {
+  std::string out;
+  try {
+    MeshLoadReport rep;
+    const TriangleMesh m = import_mesh(name, &rep);
+    put<std::uint8_t>(out, 0);
+    for (std::size_t v : {rep.file_vertices, rep.file_faces, rep.degenerate_dropped, rep.unreferenced_vertices,
+                          m.vertices.size(), m.triangles.size()})
+      put<std::uint64_t>(out, v);
+    for (const auto& v : m.vertices) out.append(reinterpret_cast<const char*>(v.data()), 3 * sizeof(double));
+    for (const auto& t : m.triangles) out.append(reinterpret_cast<const char*>(t.data()), 3 * sizeof(std::uint32_t));
+  } catch (const std::exception& e) {
+    out.clear();
+    put<std::uint8_t>(out, 1);
+    out += e.what();
+  }
+  return out;
+}
+
+}  // namespace
+
+TriangleMesh load_mesh(const std::filesystem::path& path, MeshLoadReport* report, std::chrono::milliseconds time_limit) {
+  const std::string name = path.string();
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec))
+    throw MeshError(name + ": no such mesh file");
+  if (std::filesystem::file_size(path, ec) == 0)
+    throw MeshError(name + ": file is empty");
+
+  refuse_non_finite_tokens(name);
+
+  // Untrusted files are parsed in a child process with a time limit: assimp's PLY reader loops for ever on a
+  // misspelt end_header (tests/data/bad/ply-header-typo-hang.ply), and a crash in a parser must not take
+  // the daemon with it. The child is single-threaded and never takes the importer mutex (another thread of
+  // the parent may hold it at the fork); only async-signal-safe calls follow the fork until the import.
+  int fds[2];
+  if (::pipe2(fds, O_CLOEXEC) != 0) throw MeshError(name + ": cannot start the mesh reader: " + std::strerror(errno));
+  const pid_t pid = ::fork();
+  if (pid < 0) {
+    ::close(fds[0]);
+    ::close(fds[1]);
+    throw MeshError(name + ": cannot start the mesh reader: " + std::strerror(errno));
+  }
+  if (pid == 0) {
+    ::close(fds[0]);
+    const std::string out = import_to_bytes(name);
+    std::size_t done = 0;
+    while (done < out.size()) {
+      const ssize_t n = ::write(fds[1], out.data() + done, out.size() - done);
+      if (n <= 0) _exit(3);
+      done += static_cast<std::size_t>(n);
+    }
+    _exit(0);
+  }
+  ::close(fds[1]);
+  std::string bytes;
+  const auto deadline = std::chrono::steady_clock::now() + time_limit;
+  bool timed_out = false;
+  char buf[65536];
+  while (true) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    if (left.count() <= 0) {
+      timed_out = true;
+      break;
+    }
+    pollfd p{fds[0], POLLIN, 0};
+    const int r = ::poll(&p, 1, static_cast<int>(std::min<long long>(left.count(), 1000)));
+    if (r < 0 && errno == EINTR) continue;
+    if (r <= 0) continue;
+    const ssize_t n = ::read(fds[0], buf, sizeof buf);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) break;
+    bytes.append(buf, static_cast<std::size_t>(n));
+  }
+  ::close(fds[0]);
+  if (timed_out) ::kill(pid, SIGKILL);
+  int status = 0;
+  while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  }
+  if (timed_out)
+    throw MeshError(name + ": the mesh reader did not finish within " + std::to_string(time_limit.count() / 1000.0).substr(0, 5) +
+                    " s and was stopped; the file is malformed (a PLY header without 'end_header'?) or too large");
+  if (WIFSIGNALED(status))
+    throw MeshError(name + ": the mesh reader crashed (signal " + std::to_string(WTERMSIG(status)) + "); the file is malformed");
+  if (bytes.empty()) throw MeshError(name + ": the mesh reader ended without an answer (exit " + std::to_string(WEXITSTATUS(status)) + ")");
+  std::size_t at = 0;
+  if (get<std::uint8_t>(bytes, at) != 0) throw MeshError(bytes.substr(1));
+  MeshLoadReport local;
+  local.file_vertices = get<std::uint64_t>(bytes, at);
+  local.file_faces = get<std::uint64_t>(bytes, at);
+  local.degenerate_dropped = get<std::uint64_t>(bytes, at);
+  local.unreferenced_vertices = get<std::uint64_t>(bytes, at);
+  const std::uint64_t nv = get<std::uint64_t>(bytes, at), nt = get<std::uint64_t>(bytes, at);
+  if (nv > bytes.size() / 24 || nt > bytes.size() / 12 || at + nv * 24 + nt * 12 != bytes.size())
+    throw MeshError(name + ": the mesh reader's reply is inconsistent");
+  TriangleMesh mesh;
+  mesh.vertices.resize(nv);
+  mesh.triangles.resize(nt);
+  for (auto& v : mesh.vertices) {
+    std::memcpy(v.data(), bytes.data() + at, 24);
+    at += 24;
+  }
+  for (auto& t : mesh.triangles) {
+    std::memcpy(t.data(), bytes.data() + at, 12);
+    at += 12;
+  }
   if (report) *report = local;
   return mesh;
 }

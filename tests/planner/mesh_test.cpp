@@ -2,6 +2,8 @@
 #include <filesystem>
 #include <fstream>
 
+#include <chrono>
+
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -51,6 +53,25 @@ TEST(MeshLoad, RefusesEveryBrokenSharedInput) {
     EXPECT_NE(msg, "<no error>");
   }
   EXPECT_THAT(error_of(testing::source_path("tests/data/bad/empty.stl")), HasSubstr("empty"));
+}
+
+// Issue 16, defect 1: assimp's PLY reader loops for ever on a misspelt end_header; a submit hung the daemon.
+// The reader runs in a child process that is stopped at the time limit; the refusal names the file.
+TEST(MeshLoad, AReaderThatNeverFinishesIsStoppedAtTheTimeLimit) {
+  const fs::path p = testing::source_path("tests/data/bad/ply-header-typo-hang.ply");
+  const auto t0 = std::chrono::steady_clock::now();
+  try {
+    load_mesh(p, nullptr, std::chrono::milliseconds(1500));
+    FAIL() << "the looping PLY was accepted";
+  } catch (const MeshError& e) {
+    EXPECT_THAT(e.what(), AllOf(HasSubstr("ply-header-typo-hang.ply"), HasSubstr("did not finish within 1.5")));
+  }
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(10));  // bounded, not hung
+  // A good file still reads through the child, whole.
+  MeshLoadReport rep;
+  const TriangleMesh m = load_mesh(testing::source_path("tests/data/mushroom.off"), &rep);
+  EXPECT_EQ(m.vertices.size(), 2337u);
+  EXPECT_EQ(rep.file_faces, m.triangles.size() + rep.degenerate_dropped);
 }
 
 TEST_F(TempDir, RefusesMissingFile) {
