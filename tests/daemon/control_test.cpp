@@ -82,6 +82,13 @@ TEST(Control, BadRequestsAreRefusedClearlyAndTheServerKeepsServing) {
   refused("{\"cmd\": \"abort\", \"job\": \"7\"}", "field 'job' must be an integer");
   refused("{\"cmd\": \"watch\"}", "missing field 'job'");
   refused("{\"cmd\": \"submit\", \"mesh\": \"" + std::string(70000, 'x') + "\"}", "longer than 64 KiB");
+  // Issue 16: a duplicate key ran the last one; 1e400 answered with a library exception echoing the number;
+  // deep nesting reached the recursive serializer.
+  refused("{\"cmd\": \"list\", \"cmd\": \"reload\"}", "duplicate key 'cmd'");
+  const json big = c.request("{\"cmd\": \"status\", \"job\": 1e400}");
+  EXPECT_FALSE(big["ok"].get<bool>());
+  EXPECT_EQ(big["error"], "a number in the request is out of range");
+  refused("{\"cmd\": \"submit\", \"mesh\": " + std::string(5000, '[') + std::string(5000, ']') + "}", "nested deeper than 16");
   EXPECT_EQ(handled, 0);  // nothing bad reached the daemon
   // Still serving, on the same connection and a new one.
   json r = c.request("{\"cmd\": \"submit\", \"mesh\": \"mushroom.off\", \"fit_mm\": 200}");
@@ -94,5 +101,5 @@ TEST(Control, BadRequestsAreRefusedClearlyAndTheServerKeepsServing) {
   EXPECT_TRUE(r["ok"].get<bool>());
   EXPECT_EQ(r["outcome"], "done");
   EXPECT_EQ(handled, 2);
-  EXPECT_EQ(server.refused(), 9u);
+  EXPECT_EQ(server.refused(), 12u);
 }
