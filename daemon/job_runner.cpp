@@ -593,6 +593,9 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
       // Later rounds go after the leftovers only; their views register to the model through the rows they
       // share with it, not through each other, so the between-view registration constraint is dropped.
       if (replan.cover.mode == sp::CoverMode::constrained) replan.cover.mode = sp::CoverMode::greedy;
+      // The single shot leaves slivers under cover.min_view_gain_mm2 to the loop: here every measurable row is
+      // chased (down-weighted rows included); the loop's own stop is jobs.min_gain_per_view_mm2 and retirement.
+      replan.cover.min_view_gain = 0.0;
       // Nothing can measure the unmeasurable rows and the retired ones failed too often: neither is chased.
       // A row that failed once weighs less, so no view is planned chiefly for it.
       std::vector<std::uint8_t> measured = measured_now;
