@@ -73,7 +73,7 @@ struct JobSettings {
   /// down-weighted for the next plan (failed once) and, after `retire_after_failures` such rounds, retired:
   /// reported as needing attention, never chased again. A replan whose predicted gain per view is under
   /// `min_gain_per_view_mm2` is not executed: the job stops there.
-  int retire_after_failures = 2;
+  int retire_after_failures = 3;
   double failed_row_weight = 0.25;
   double min_gain_per_view_mm2 = 5.0;
   planner::CoverageOptions coverage;               // when a rough-model row counts as measured

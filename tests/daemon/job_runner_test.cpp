@@ -160,7 +160,7 @@ TEST_F(SimCell, CubeJobMeasuresEverythingTheCellCanMeasure) {
 
 // Issue 15, the closed loop: the submitted mesh has a block on top that the real object lacks. Every round
 // predicts the block's rows measurable and none is ever measured. The loop must not chase them round after
-// round to jobs.max_rounds: after two rounds they are retired as needing attention, the rounds that
+// round to jobs.max_rounds: after jobs.retire_after_failures (3) rounds they are retired as needing attention, the rounds that
 // delivered under 20 % of their prediction are named, and the job stops.
 TEST_F(SimCell, RowsPredictedTwiceAndNeverMeasuredAreRetiredNotChased) {
   sp::TriangleMesh phantom;
