@@ -75,7 +75,7 @@ struct SimCell : ::testing::Test {
     bring_up(*io, models.cell, 10000ms);
     journal = std::make_unique<Journal>(dir / "data");
   }
-  void TearDown() override { if (!std::getenv("KEEPDIR")) fs::remove_all(dir); }
+  void TearDown() override { fs::remove_all(dir); }
 
   std::optional<SimTruth> truth;
   bool register_views = true;

@@ -50,7 +50,6 @@ TEST(CellViewpoints, EveryCandidateIsReachableClearAndHasTheCellsTwist) {
   const sp::CollisionChecker checker(b.cell, b.rough.mesh());
   for (const auto& v : b.views) {
     const auto ik = sp::inverse_kinematics(b.cell, b.pose(v), v.scan_length_mm);
-    if (std::getenv("CELLDIAG")) std::fprintf(stderr, "row %d n %.2f %.2f %.2f var %d standoff %.1f\n", v.target_row, b.rough.normals[v.target_row].x(), b.rough.normals[v.target_row].y(), b.rough.normals[v.target_row].z(), v.twist_level, v.standoff_mm);
     ASSERT_TRUE(ik.ok) << ik.why;
     EXPECT_FALSE(checker.collides(b.pose(v), v.scan_length_mm));
     const Eigen::Vector3d y_table = (b.cell.object_on_table * b.pose(v)).linear().col(1);
