@@ -133,6 +133,25 @@ std::vector<std::uint8_t> failure_counts(const std::vector<json>& round_infos, c
   return fails;
 }
 
+/// Rows the closed loop gives up on (needs attention): predicted measurable by `retire_after` executed rounds
+/// and still unmeasured, or predicted by a replanning round that measured nothing new at all — that round's
+/// predictions did not hold anywhere, and the loop stops there, so its rows are not chased again either.
+std::vector<std::uint8_t> given_up_rows(const std::vector<json>& round_infos, const std::vector<std::uint8_t>& measured,
+                                        double measured_now, int retire_after) {
+  const std::vector<std::uint8_t> fails = failure_counts(round_infos, measured);
+  std::vector<std::uint8_t> out(fails.size(), 0);
+  for (std::size_t r = 0; r < fails.size(); ++r) out[r] = fails[r] >= retire_after;
+  if (round_infos.size() > 1) {
+    const json& last = round_infos.back();
+    if (measured_now <= last.value("measured_before", 0.0) + 1e-9 && last.contains("predicted_rows"))
+      for (const auto& r : last.at("predicted_rows")) {
+        const auto row = r.get<std::size_t>();
+        if (row < out.size() && !measured[row]) out[row] = 1;
+      }
+  }
+  return out;
+}
+
 /// Each executed round's predicted and realized gain (mm²): realized is what the measured coverage rose by
 /// from the round's start to the next round's start (or to `measured_now` for the last).
 json round_gains(const std::vector<json>& round_infos, double measured_now, double total_mm2) {
@@ -320,14 +339,16 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
       std::vector<std::uint8_t> measured = j.coverage->measured_rows();
       for (auto r : j.unmeasurable) measured[r] = 1;
       const auto fails = failure_counts(infos, measured);
+      const auto given_up = given_up_rows(infos, measured, j.progress.measured, settings_.retire_after_failures);
       std::size_t n = 0;
       double area = 0.0;
       const auto attention = settings_.jobs_dir / std::to_string(j.id) / "needs_attention.xyz";
       std::ofstream fa(attention);
       fa << "# rows predicted measurable by " << settings_.retire_after_failures
-         << " or more executed rounds and still unmeasured: x y z (mm, object frame) nx ny nz area_mm2 rounds_failed\n";
+         << " or more executed rounds, or by a replanning round that measured nothing new, and still unmeasured:"
+            " x y z (mm, object frame) nx ny nz area_mm2 rounds_failed\n";
       for (std::size_t r = 0; r < fails.size(); ++r)
-        if (fails[r] >= settings_.retire_after_failures) {
+        if (given_up[r]) {
           ++n;
           area += j.rough->area_mm2[r];
           const auto& p = j.rough->points[r];
@@ -545,12 +566,12 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
       std::vector<std::uint8_t> measured_now = j.coverage->measured_rows();
       for (auto r : j.unmeasurable) measured_now[r] = 1;
       const std::vector<std::uint8_t> fails = failure_counts(infos, measured_now);
-      std::vector<std::uint8_t> retired(fails.size(), 0);
+      const std::vector<std::uint8_t> retired =
+          given_up_rows(infos, measured_now, j.progress.measured, settings_.retire_after_failures);
       std::size_t n_retired = 0;
       double retired_area = 0.0;
       for (std::size_t r = 0; r < fails.size(); ++r)
-        if (fails[r] >= settings_.retire_after_failures) {
-          retired[r] = 1;
+        if (retired[r]) {
           ++n_retired;
           retired_area += j.rough->area_mm2[r];
         }
@@ -575,9 +596,9 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
       for (auto r : j.coverage->unmeasured_rows())
         open_retired += retired[r] && (j.rough->hypothetical.empty() || !j.rough->hypothetical[r]);
       if (open_retired == open && (guessed == 0 || j.round >= 1)) {
-        finish(j, JobState::stalled, std::to_string(n_retired) + " rows (" + fmt(retired_area, 1) + " mm2) need attention: " +
+        finish(j, JobState::stalled, std::to_string(n_retired) + " rows (" + fmt(retired_area, 1) + " mm2) need attention: predicted measurable by " +
                                          std::to_string(settings_.retire_after_failures) +
-                                         " rounds predicted them measurable and did not measure them; " + summary);
+                                         " rounds, or by a round that measured nothing new, and not measured; " + summary);
         return JobState::stalled;
       }
       if (j.round + 1 >= settings_.max_rounds) {
@@ -585,7 +606,8 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
         return JobState::stalled;
       }
       if (j.round > 0 && j.progress.measured <= info.value("measured_before", 0.0) + 1e-9) {
-        finish(j, JobState::stalled, "round " + std::to_string(j.round) + " measured nothing new: " + summary);
+        finish(j, JobState::stalled, "round " + std::to_string(j.round) + " measured nothing new; " + std::to_string(n_retired) +
+                                         " rows (" + fmt(retired_area, 1) + " mm2) need attention: " + summary);
         return JobState::stalled;
       }
       transition(j, JobState::replanning, std::to_string(open) + " rows left");

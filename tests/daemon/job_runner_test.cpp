@@ -160,8 +160,9 @@ TEST_F(SimCell, CubeJobMeasuresEverythingTheCellCanMeasure) {
 
 // Issue 15, the closed loop: the submitted mesh has a block on top that the real object lacks. Every round
 // predicts the block's rows measurable and none is ever measured. The loop must not chase them round after
-// round to jobs.max_rounds: after jobs.retire_after_failures (3) rounds they are retired as needing attention, the rounds that
-// delivered under 20 % of their prediction are named, and the job stops.
+// round to jobs.max_rounds: after jobs.retire_after_failures (3) rounds, or at once when a replanning round
+// measures nothing new, they are retired as needing attention, the rounds that delivered under 20 % of their
+// prediction are named, and the job stops.
 TEST_F(SimCell, RowsPredictedTwiceAndNeverMeasuredAreRetiredNotChased) {
   sp::TriangleMesh phantom;
   const sp::TriangleMesh cube = sp::load_mesh(write_cube(dir));
@@ -187,6 +188,10 @@ TEST_F(SimCell, RowsPredictedTwiceAndNeverMeasuredAreRetiredNotChased) {
     if (e.rfind("round ", 0) == 0 || e.rfind("stalled", 0) == 0) std::cout << e << "\n";
   EXPECT_LT(result["rounds"].get<int>(), 6);  // stopped before max_rounds
   EXPECT_GT(result["needs_attention_rows"].get<int>(), 0);
+  // The stop names the same rows the result counts.
+  EXPECT_THAT(journal->job(job).cause,
+              HasSubstr(std::to_string(result["needs_attention_rows"].get<int>()) + " rows ("));
+  EXPECT_THAT(journal->job(job).cause, HasSubstr("need attention"));
   // What needs attention is chiefly the block that is not there (a sliver of the real walls at the plate,
   // which the rough model promises and no view delivers, may join it).
   std::ifstream f(result["needs_attention_file"].get<std::string>());
