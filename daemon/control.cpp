@@ -15,6 +15,8 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include "planner/json_input.hpp"
+
 namespace scancell::daemon {
 namespace {
 
@@ -77,27 +79,13 @@ bool send_line(int fd, const json& j) {
 
 json parse_request(const std::string& line) {
   if (line.size() > kMaxRequestBytes) throw std::invalid_argument("request longer than 64 KiB");
-  json j;
   // Refused while parsing: a key given twice in one object (the last would win silently) and nesting deeper
   // than a request ever needs (the serializer recurses). No message echoes the request's own text.
-  constexpr int kMaxDepth = 16;
-  std::vector<std::set<std::string>> keys;
-  const json::parser_callback_t check = [&](int depth, json::parse_event_t event, json& parsed) {
-    if (depth > kMaxDepth) throw std::invalid_argument("request nested deeper than " + std::to_string(kMaxDepth) + " levels");
-    if (event == json::parse_event_t::object_start) keys.emplace_back();
-    else if (event == json::parse_event_t::object_end && !keys.empty()) keys.pop_back();
-    else if (event == json::parse_event_t::key && !keys.empty() && !keys.back().insert(parsed.get<std::string>()).second)
-      throw std::invalid_argument("duplicate key '" + parsed.get<std::string>().substr(0, 64) + "'");
-    return true;
-  };
+  json j;
   try {
-    j = json::parse(line, check);
-  } catch (const json::parse_error& e) {
-    throw std::invalid_argument(std::string("malformed JSON at byte ") + std::to_string(e.byte));
-  } catch (const json::out_of_range&) {
-    throw std::invalid_argument("a number in the request is out of range");  // e.g. 1e400
-  } catch (const json::exception& e) {
-    throw std::invalid_argument("malformed JSON (" + std::to_string(e.id) + ")");
+    j = planner::parse_json_input(line, planner::JsonLimits{16, true});
+  } catch (const planner::JsonInputError& e) {
+    throw std::invalid_argument(std::string("request: ") + e.what());
   }
   if (!j.is_object()) throw std::invalid_argument("a request must be a JSON object");
   if (!j.contains("cmd") || !j["cmd"].is_string()) throw std::invalid_argument("missing \"cmd\" (a string)");

@@ -1,5 +1,7 @@
 #include "planner/plan_file.hpp"
 
+#include "planner/json_input.hpp"
+
 #include <cmath>
 #include <fstream>
 
@@ -47,9 +49,10 @@ PlanFile load_plan_file(const std::filesystem::path& path) {
   if (!f) throw DataError(r.file + ": cannot open file");
   json j;
   try {
-    j = json::parse(f);
-  } catch (const json::parse_error& e) {
-    throw DataError(r.file + ": not valid JSON at byte " + std::to_string(e.byte) + ": " + e.what());
+    // A plan nests 4 levels; 32 leaves room and refuses a hostile file before anything recurses on it.
+    j = parse_json_input(f, JsonLimits{32, true});
+  } catch (const JsonInputError& e) {
+    throw DataError(r.file + ": " + e.what());
   }
   PlanFile p;
   p.path = r.file;

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include <Eigen/Core>
+#include <yaml-cpp/depthguard.h>
 #include <yaml-cpp/yaml.h>
 
 #include "planner/errors.hpp"
@@ -120,6 +121,8 @@ inline Section open_root(const std::filesystem::path& file, YAML::Node& holder) 
     holder = YAML::LoadFile(file.string());
   } catch (const YAML::BadFile&) {
     throw ConfigError(file.string() + ": cannot open file");
+  } catch (const YAML::DeepRecursion& e) {
+    throw ConfigError(file.string() + ": nested deeper than a configuration ever needs, at line " + std::to_string(e.mark.line + 1));
   } catch (const YAML::Exception& e) {
     throw ConfigError(file.string() + ": invalid YAML at line " + std::to_string(e.mark.line + 1) + ", column " +
                       std::to_string(e.mark.column + 1) + ": " + e.msg);
@@ -131,6 +134,8 @@ inline Section open_root(const std::filesystem::path& file, YAML::Node& holder) 
 inline Section parse_root(const std::string& text, const std::string& where, YAML::Node& holder) {
   try {
     holder = YAML::Load(text);
+  } catch (const YAML::DeepRecursion& e) {
+    throw ConfigError(where + ": nested deeper than a configuration ever needs, at line " + std::to_string(e.mark.line + 1));
   } catch (const YAML::Exception& e) {
     throw ConfigError(where + ": invalid YAML/JSON at line " + std::to_string(e.mark.line + 1) + ", column " +
                       std::to_string(e.mark.column + 1) + ": " + e.msg);

@@ -95,6 +95,12 @@ TEST_F(BadConfig, InvalidYamlNamesTheLine) {
   EXPECT_THAT(error_with("kind: line_scan", "kind: pinhole"), HasSubstr("kind: must be line_scan or random_access"));
 }
 
+// Issue 16, defect 3: deep nesting is refused by the parser with a message, before anything recurses on it.
+TEST_F(BadConfig, DeepNestingIsRefusedNamingTheFile) {
+  EXPECT_THAT(error_with("samples_y: 256", "samples_y: " + std::string(100000, '[') + std::string(100000, ']')),
+              HasSubstr("nested deeper than a configuration ever needs"));
+}
+
 TEST(Config, MissingFileAndBadPlannerSettings) {
   EXPECT_THROW(load_sensor("/nonexistent/sensor.yaml"), ConfigError);
   const fs::path p = fs::temp_directory_path() / ("scancell-settings-" + std::to_string(::getpid()) + ".yaml");

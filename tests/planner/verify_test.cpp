@@ -5,6 +5,7 @@
 #include <fstream>
 #include <set>
 
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include "planner/baselines.hpp"
@@ -199,6 +200,28 @@ TEST(PlanFile, RoundTripsThePlanAndNamesDamage) {
   refused(bad, "format");
   std::ofstream(dir / "bad.json") << "{\"format\": \"scancell-plan\", ";
   EXPECT_THROW(sp::load_plan_file(dir / "bad.json"), sp::DataError);
+  // Issue 16, defect 3: a sensor nested 200,000 levels deep crashed the recursive serializer (stack overflow);
+  // it is refused while parsing, naming the file, and so is a key given twice.
+  {
+    std::string deep = j.dump();
+    const std::string nest = std::string(200000, '[') + std::string(200000, ']');
+    deep.replace(deep.find("\"sensor\":") + 9, 0, "{\"x\":" + nest + ",\"y\":");
+    deep.replace(deep.find("\"spec\":") - 1, 0, "}");
+    std::ofstream(dir / "bad.json") << deep;
+  }
+  try {
+    sp::load_plan_file(dir / "bad.json");
+    ADD_FAILURE() << "a 200,000-deep plan was accepted";
+  } catch (const sp::DataError& e) {
+    EXPECT_THAT(e.what(), testing::HasSubstr("bad.json: nested deeper than 32 levels"));
+  }
+  std::ofstream(dir / "bad.json") << "{\"format\": \"scancell-plan\", \"format\": \"other\"}";
+  try {
+    sp::load_plan_file(dir / "bad.json");
+    ADD_FAILURE() << "a duplicate key was accepted";
+  } catch (const sp::DataError& e) {
+    EXPECT_THAT(e.what(), testing::HasSubstr("key 'format' given twice"));
+  }
   std::filesystem::remove_all(dir);
 }
 
