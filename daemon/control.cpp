@@ -1,9 +1,11 @@
 #include "daemon/control.hpp"
 
 #include <cerrno>
+#include <chrono>
 #include <cstring>
 #include <map>
 #include <set>
+#include <sstream>
 #include <string>
 #include <vector>
 #include <stdexcept>
@@ -103,13 +105,16 @@ json parse_request(const std::string& line) {
   return j;
 }
 
-ControlServer::ControlServer(std::filesystem::path path, Handler handler, const std::string& group)
-    : path_(std::move(path)), handler_(std::move(handler)) {
+ControlServer::ControlServer(std::filesystem::path path, Handler handler, ControlOptions options)
+    : path_(std::move(path)), handler_(std::move(handler)), options_(std::move(options)) {
+  if (options_.max_clients < 1) throw std::invalid_argument("control.max_clients must be at least 1");
+  if (!(options_.idle_timeout_s > 0.0) || !(options_.send_timeout_s > 0.0))
+    throw std::invalid_argument("control.idle_timeout_s and control.send_timeout_s must be > 0");
   sockaddr_un addr{};
   addr.sun_family = AF_UNIX;
   if (path_.string().size() >= sizeof addr.sun_path) throw std::runtime_error(path_.string() + ": socket path too long");
   std::memcpy(addr.sun_path, path_.c_str(), path_.string().size() + 1);
-  listen_fd_ = ::socket(AF_UNIX, SOCK_STREAM, 0);
+  listen_fd_ = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
   if (listen_fd_ < 0) throw std::runtime_error(path_.string() + ": socket: " + std::strerror(errno));
   ::unlink(path_.c_str());
   if (::bind(listen_fd_, reinterpret_cast<sockaddr*>(&addr), sizeof addr) < 0 || ::listen(listen_fd_, 8) < 0) {
@@ -118,6 +123,7 @@ ControlServer::ControlServer(std::filesystem::path path, Handler handler, const 
     throw std::runtime_error(path_.string() + ": bind/listen: " + std::strerror(e));
   }
   ::chmod(path_.c_str(), 0660);  // owner and group only
+  const std::string& group = options_.group;
   if (!group.empty()) {
     const struct group* g = ::getgrnam(group.c_str());
     if (!g || ::chown(path_.c_str(), static_cast<uid_t>(-1), g->gr_gid) != 0) {
@@ -144,8 +150,13 @@ void ControlServer::accept_loop() {
   while (running_) {
     pollfd p{listen_fd_, POLLIN, 0};
     if (::poll(&p, 1, 50) <= 0) continue;
-    const int c = ::accept(listen_fd_, nullptr, nullptr);
+    const int c = ::accept4(listen_fd_, nullptr, nullptr, SOCK_CLOEXEC);
     if (c < 0) continue;
+    // A client that stops reading its replies is dropped after control.send_timeout_s, not waited for.
+    timeval tv{};
+    tv.tv_sec = static_cast<time_t>(options_.send_timeout_s);
+    tv.tv_usec = static_cast<suseconds_t>((options_.send_timeout_s - static_cast<double>(tv.tv_sec)) * 1e6);
+    ::setsockopt(c, SOL_SOCKET, SO_SNDTIMEO, &tv, sizeof tv);
     std::lock_guard<std::mutex> lock(clients_mu_);
     for (auto it = clients_.begin(); it != clients_.end();) {
       if (*it->done) {
@@ -154,6 +165,14 @@ void ControlServer::accept_loop() {
       } else {
         ++it;
       }
+    }
+    if (clients_.size() >= static_cast<std::size_t>(options_.max_clients)) {
+      ++turned_away_;
+      send_line(c, {{"ok", false},
+                    {"error", "too many clients: " + std::to_string(clients_.size()) + " connected (control.max_clients " +
+                                  std::to_string(options_.max_clients) + "); try again later"}});
+      ::close(c);
+      continue;
     }
     auto done = std::make_shared<std::atomic<bool>>(false);
     clients_.push_back({std::thread([this, c, done] {
@@ -168,27 +187,42 @@ void ControlServer::serve(int fd) {
   std::string buf;
   char chunk[4096];
   bool open = true;
+  // A line over the limit is refused as soon as it is known to be too long; the rest of it, up to its newline,
+  // is discarded as it arrives (never with a blocking read: a client that stalls there must not hold shutdown).
+  bool skipping = false;
+  using clock = std::chrono::steady_clock;
+  auto last_request = clock::now();
+  const auto idle = std::chrono::duration<double>(options_.idle_timeout_s);
   while (running_ && open) {
+    if (clock::now() - last_request > idle) {
+      ++dropped_idle_;
+      std::ostringstream why;
+      why << "no request for " << options_.idle_timeout_s << " s (control.idle_timeout_s): connection closed";
+      send_line(fd, {{"ok", false}, {"error", why.str()}});
+      break;
+    }
     pollfd p{fd, POLLIN, 0};
     if (::poll(&p, 1, 50) <= 0) continue;
-    const ssize_t n = ::recv(fd, chunk, sizeof chunk, 0);
+    const ssize_t n = ::recv(fd, chunk, sizeof chunk, MSG_DONTWAIT);
+    if (n < 0 && (errno == EAGAIN || errno == EINTR)) continue;
     if (n <= 0) break;
-    buf.append(chunk, static_cast<std::size_t>(n));
-    // A line longer than the limit is refused as soon as it is known to be too long, and dropped.
+    const char* data = chunk;
+    std::size_t size = static_cast<std::size_t>(n);
+    if (skipping) {
+      const char* nl = static_cast<const char*>(std::memchr(data, '\n', size));
+      if (!nl) continue;
+      skipping = false;
+      size -= static_cast<std::size_t>(nl + 1 - data);
+      data = nl + 1;
+    }
+    buf.append(data, size);
     if (buf.find('\n') == std::string::npos && buf.size() > kMaxRequestBytes) {
       ++refused_;
       open = send_line(fd, {{"ok", false}, {"error", "request longer than 64 KiB"}});
       buf.clear();
-      // Skip the rest of that line.
-      while (open && running_) {
-        const ssize_t m = ::recv(fd, chunk, sizeof chunk, 0);
-        if (m <= 0) { open = false; break; }
-        const char* nl = static_cast<const char*>(std::memchr(chunk, '\n', static_cast<std::size_t>(m)));
-        if (nl) {
-          buf.assign(nl + 1, static_cast<std::size_t>(chunk + m - (nl + 1)));
-          break;
-        }
-      }
+      skipping = true;
+      last_request = clock::now();
+      continue;
     }
     for (std::size_t nl; open && (nl = buf.find('\n')) != std::string::npos;) {
       const std::string line = buf.substr(0, nl);
@@ -208,6 +242,7 @@ void ControlServer::serve(int fd) {
         reply = {{"ok", false}, {"error", std::string("failed: ") + e.what()}};
       }
       open = open && send_line(fd, reply);
+      last_request = clock::now();
     }
   }
   ::close(fd);

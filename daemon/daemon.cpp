@@ -45,7 +45,7 @@ Daemon::Daemon(DaemonConfig config) : config_(std::move(config)) {
   fs::create_directories(config_.socket_path.parent_path());
   control_ = std::make_unique<ControlServer>(
       config_.socket_path, [this](const json& r, const std::function<bool(const json&)>& send) { return handle(r, send); },
-      config_.socket_group);
+      config_.control);
   job_thread_ = std::thread([this] { job_loop(); });
 }
 

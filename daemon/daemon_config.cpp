@@ -54,7 +54,10 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
     sp::Section s = y.section("control");
     const std::string socket_key = s.get<std::string>("socket");
     c.socket_path = socket.empty() ? relative_to(c.file, socket_key) : fs::absolute(socket);
-    c.socket_group = s.get_or<std::string>("group", "");
+    c.control.group = s.get_or<std::string>("group", "");
+    c.control.max_clients = s.ranged<int>("max_clients", c.control.max_clients, 1, 1000);
+    c.control.idle_timeout_s = s.ranged<double>("idle_timeout_s", c.control.idle_timeout_s, 0.1, 86400.0);
+    c.control.send_timeout_s = s.ranged<double>("send_timeout_s", c.control.send_timeout_s, 0.1, 600.0);
     s.finish();
   }
   {

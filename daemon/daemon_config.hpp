@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "daemon/control.hpp"
 #include "daemon/job_runner.hpp"
 #include "drivers/config.hpp"
 
@@ -20,7 +21,7 @@ struct DaemonConfig {
   std::filesystem::path data_dir;
   std::string lcm_url;
   std::filesystem::path socket_path;
-  std::string socket_group;
+  ControlOptions control;  // control.group, max_clients, idle_timeout_s, send_timeout_s
   std::string scanner_driver = "sim";  // sim: the simulated line scanner (no vendor SDK in this build)
   std::uint64_t scanner_seed = 1;
   std::optional<SimTruth> truth;       // scanner.truth: what the simulated cell really is (calibration tests)

@@ -84,6 +84,18 @@ class Section {
     if (!(v >= 0.0)) fail(key_path(key), "must be >= 0, got " + std::to_string(v));
     return v;
   }
+  /// The key's default and its closed range in one call: absent gives `fallback`, outside [lo, hi] is refused
+  /// naming the value.
+  template <class T>
+  T ranged(const std::string& key, T fallback, T lo, T hi) {
+    const T v = get_or<T>(key, fallback);
+    if (!(v >= lo && v <= hi)) {
+      std::ostringstream os;
+      os << "must be in [" << lo << ", " << hi << "], got " << v;
+      fail(key_path(key), os.str());
+    }
+    return v;
+  }
   /// Refuses keys nobody asked for: a typo must not silently fall back to a default.
   void finish() const {
     for (const auto& kv : node_) {

@@ -2,7 +2,11 @@
 // serving; valid requests reach the handler; the socket is 0660.
 #include <cstring>
 #include <filesystem>
+#include <atomic>
+#include <chrono>
+#include <memory>
 #include <string>
+#include <thread>
 
 #include <gtest/gtest.h>
 #include <sys/socket.h>
@@ -102,4 +106,59 @@ TEST(Control, BadRequestsAreRefusedClearlyAndTheServerKeepsServing) {
   EXPECT_EQ(r["outcome"], "done");
   EXPECT_EQ(handled, 2);
   EXPECT_EQ(server.refused(), 12u);
+}
+
+// Issue 16, defect 4: the rest of an oversized line was skipped with a blocking recv, so a client that sent
+// 64 KiB + 1 without a newline and then stalled held the server's destructor (and the daemon's SIGTERM) for
+// ever. The server now stops within its poll period whatever the client does.
+TEST(Control, AnOversizedLineFromAStalledClientDoesNotHoldShutdown) {
+  const std::string path = (std::filesystem::temp_directory_path() / ("scancell-ctl4-" + std::to_string(::getpid()) + ".sock")).string();
+  auto server = std::make_unique<dm::ControlServer>(path, [](const json&, const auto&) -> json { return json::object(); });
+  Client c(path);
+  c.send_raw(std::string(dm::kMaxRequestBytes + 100, 'x'));  // no newline: the server skips until one comes
+  EXPECT_EQ(c.line()["error"], "request longer than 64 KiB");
+  c.send_raw(std::string(1000, 'y'));  // more of the same line, then silence
+  std::atomic<bool> stopped{false};
+  std::thread stopper([&] {
+    server.reset();
+    stopped = true;
+  });
+  // Before the fix the destructor never returned; give it far more than its 50 ms poll period.
+  for (int k = 0; k < 200 && !stopped; ++k) std::this_thread::sleep_for(std::chrono::milliseconds(25));
+  EXPECT_TRUE(stopped) << "the server did not stop while a client stalled mid-line";
+  if (!stopped) c.send_raw("\n");  // let a broken build finish the test instead of hanging
+  stopper.join();
+}
+
+// The lesser finding beside it: a thousand idle clients exhausted descriptors at one thread each. Connections
+// beyond control.max_clients are refused with a reply naming the setting, and a client that sends nothing for
+// control.idle_timeout_s is told so and dropped; after the rest of an oversized line the client is served.
+TEST(Control, ConnectionsAreCappedAndIdleClientsDropped) {
+  const std::string path = (std::filesystem::temp_directory_path() / ("scancell-ctl5-" + std::to_string(::getpid()) + ".sock")).string();
+  dm::ControlOptions o;
+  o.max_clients = 2;
+  o.idle_timeout_s = 0.5;
+  dm::ControlServer server(path, [](const json&, const auto&) -> json { return {{"jobs", json::array()}}; }, o);
+  Client a(path), b(path);
+  EXPECT_TRUE(a.request("{\"cmd\": \"list\"}")["ok"].get<bool>());
+  EXPECT_TRUE(b.request("{\"cmd\": \"list\"}")["ok"].get<bool>());
+  Client third(path);
+  const json r = third.line();
+  EXPECT_FALSE(r["ok"].get<bool>());
+  EXPECT_NE(r["error"].get<std::string>().find("control.max_clients 2"), std::string::npos) << r.dump();
+  EXPECT_EQ(server.turned_away(), 1u);
+  // a keeps talking (an oversized line, then the rest of it and a valid request); b idles and is dropped.
+  a.send_raw(std::string(dm::kMaxRequestBytes + 10, 'x'));
+  EXPECT_EQ(a.line()["error"], "request longer than 64 KiB");
+  a.send_raw("tail of the long line\n{\"cmd\": \"list\"}\n");
+  EXPECT_TRUE(a.line()["ok"].get<bool>());
+  const json idle = b.line();
+  EXPECT_NE(idle["error"].get<std::string>().find("control.idle_timeout_s"), std::string::npos) << idle.dump();
+  EXPECT_THROW(b.line(), std::runtime_error);  // closed
+  // a goes quiet too, and is dropped a little later (its last request came after b's).
+  EXPECT_NE(a.line()["error"].get<std::string>().find("control.idle_timeout_s"), std::string::npos);
+  EXPECT_EQ(server.dropped_idle(), 2u);
+  // With both gone a new client is served again.
+  Client d(path);
+  EXPECT_TRUE(d.request("{\"cmd\": \"list\"}")["ok"].get<bool>());
 }
