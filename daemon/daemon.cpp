@@ -1,5 +1,6 @@
 #include "daemon/daemon.hpp"
 
+#include <cctype>
 #include <csignal>
 #include <iostream>
 
@@ -8,6 +9,7 @@
 #include "calibration/results.hpp"
 #include "daemon/calibration_job.hpp"
 #include "planner/errors.hpp"
+#include "planner/text_file.hpp"
 
 namespace scancell::daemon {
 
@@ -24,12 +26,48 @@ bool runnable(JobState s) {
 
 bool ends_watch(JobState s) { return finished(s) || s == JobState::faulted || s == JobState::paused; }
 
-std::string absolute_file(const json& req, const char* key) {
+/// A file a client names: absolute, a regular file (a FIFO or device would block the thread that opens it),
+/// and, when jobs.allowed_dirs is set, inside one of them after links are resolved. Nothing of the file's
+/// content is quoted in a refusal.
+std::string client_file(const json& req, const char* key, const std::vector<fs::path>& allowed) {
   if (!req.contains(key)) return "";
   const std::string p = req[key].get<std::string>();
+  const std::string name = std::string("submit: '") + key + "'";
   if (p.empty() || p[0] != '/')
-    throw std::invalid_argument(std::string("submit: '") + key + "' must be an absolute path (the daemon's working directory is not yours), got '" + p + "'");
-  return p;
+    throw std::invalid_argument(name + " must be an absolute path (the daemon's working directory is not yours), got '" + p + "'");
+  const std::string kind = planner::file_kind(p);
+  if (kind == "missing") throw std::invalid_argument(name + ": no such file '" + p + "'");
+  if (kind != "regular file") throw std::invalid_argument(name + ": '" + p + "' is a " + kind + ", not a regular file");
+  if (allowed.empty()) return p;
+  std::error_code ec;
+  const fs::path real = fs::canonical(p, ec);
+  if (ec) throw std::invalid_argument(name + ": cannot resolve '" + p + "'");
+  for (const auto& dir : allowed) {
+    const auto rel = real.lexically_relative(dir);
+    if (!rel.empty() && *rel.begin() != "..") return real.string();
+  }
+  std::string dirs;
+  for (const auto& d : allowed) dirs += (dirs.empty() ? "" : ", ") + d.string();
+  throw std::invalid_argument(name + ": '" + p + "' is outside jobs.allowed_dirs (" + dirs + ")");
+}
+
+/// A refusal of a client-named YAML file without its content: quoted values become '…' and what follows
+/// "got " is dropped, so no value of a file the client could not read itself comes back over the socket.
+std::string without_content(const std::string& message) {
+  std::string out;
+  bool quoted = false;
+  for (std::size_t k = 0; k < message.size(); ++k) {
+    const char ch = message[k];
+    // An opening quote follows a space or bracket (an apostrophe, as in "daemon's", follows a letter).
+    if (ch == '\'' && (quoted || k == 0 || !std::isalnum(static_cast<unsigned char>(message[k - 1])))) {
+      if (!quoted) out += "'…'";
+      quoted = !quoted;
+      continue;
+    }
+    if (!quoted) out += ch;
+  }
+  if (const auto g = out.find(", got "); g != std::string::npos) out.erase(g);
+  return out;
 }
 
 }  // namespace
@@ -211,10 +249,10 @@ json Daemon::handle(const json& req, const std::function<bool(const json&)>& sen
   const std::string cmd = req["cmd"];
   if (cmd == "submit") {
     JobRequest r;
-    r.mesh = absolute_file(req, "mesh");
-    r.spec = absolute_file(req, "spec");
-    r.settings = absolute_file(req, "settings");
-    r.truth = absolute_file(req, "truth");
+    r.mesh = client_file(req, "mesh", config_.allowed_dirs);
+    r.spec = client_file(req, "spec", config_.allowed_dirs);
+    r.settings = client_file(req, "settings", config_.allowed_dirs);
+    r.truth = client_file(req, "truth", config_.allowed_dirs);
     r.fit_mm = req.value("fit_mm", 0.0);
     if (req.contains("bbox_mm")) r.bbox_mm = Eigen::Vector3d(req["bbox_mm"][0].get<double>(), req["bbox_mm"][1].get<double>(), req["bbox_mm"][2].get<double>());
     if (r.bbox_mm && r.truth.empty() && config_.scanner_driver == "sim")
@@ -229,7 +267,7 @@ json Daemon::handle(const json& req, const std::function<bool(const json&)>& sen
     } catch (const planner::MeshError& e) {
       throw std::invalid_argument(std::string("submit: mesh refused: ") + e.what());
     } catch (const planner::ConfigError& e) {
-      throw std::invalid_argument(std::string("submit: config refused: ") + e.what());
+      throw std::invalid_argument(std::string("submit: config refused: ") + without_content(e.what()));
     }
     const std::string what = r.bbox_mm ? "bbox:" + std::to_string(r.bbox_mm->x()) + "x" + std::to_string(r.bbox_mm->y()) + "x" +
                                               std::to_string(r.bbox_mm->z())

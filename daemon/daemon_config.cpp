@@ -145,6 +145,20 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
     c.jobs.planner_threads = s.get_or<int>("planner_threads", 0);
     if (c.jobs.planner_threads < 0) s.fail(s.key_path("planner_threads"), "must be >= 0 (0: all cores)");
     c.home_timeout = std::chrono::milliseconds(static_cast<long>(1000.0 * s.get_or<double>("home_timeout_s", 60.0)));
+    if (s.has("allowed_dirs")) {
+      // The only directories a client's submit may name files in (mesh, truth, spec, settings); resolved
+      // now, links included, so a client's path is compared with what it really is.
+      const YAML::Node n = s.raw("allowed_dirs");
+      if (!n.IsSequence() || n.size() == 0) s.fail(s.key_path("allowed_dirs"), "must be a non-empty list of directories");
+      for (std::size_t k = 0; k < n.size(); ++k) {
+        const std::string at = s.key_path("allowed_dirs") + "[" + std::to_string(k) + "]";
+        if (!n[k].IsScalar()) s.fail(at, "must be a directory path");
+        const fs::path d = relative_to(c.file, n[k].as<std::string>());
+        std::error_code ec;
+        if (!fs::is_directory(d, ec)) s.fail(at, "'" + d.string() + "' is not a directory");
+        c.allowed_dirs.push_back(fs::canonical(d));
+      }
+    }
     s.finish();
   }
   y.finish();

@@ -26,6 +26,9 @@ struct DaemonConfig {
   std::uint64_t scanner_seed = 1;
   std::optional<SimTruth> truth;       // scanner.truth: what the simulated cell really is (calibration tests)
   JobSettings jobs;
+  /// jobs.allowed_dirs: a client may name files (mesh, truth, spec, settings) only under these (canonical);
+  /// empty: any regular file the daemon can read, said at start.
+  std::vector<std::filesystem::path> allowed_dirs;
   std::chrono::milliseconds home_timeout{60000};
 
   std::vector<std::string> calibration_applied;  // files applied at start or reload, in order

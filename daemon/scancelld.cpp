@@ -87,6 +87,8 @@ int main(int argc, char** argv) {
     std::cerr << "scancelld: configuration refused: " << e.what() << "\n";
     return 4;
   }
+  if (cfg.allowed_dirs.empty())
+    std::cerr << "scancelld: jobs.allowed_dirs is not set: clients may name any regular file this daemon can read\n";
   try {
     scancell::daemon::Daemon d(std::move(cfg));
     return d.run();

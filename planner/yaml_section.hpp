@@ -14,6 +14,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include "planner/errors.hpp"
+#include "planner/text_file.hpp"
 
 namespace scancell::planner {
 
@@ -128,11 +129,14 @@ class Section {
   std::set<std::string> used_;
 };
 
+/// Configuration files are small; anything larger is not one (and is not read into memory).
+inline constexpr std::size_t kMaxConfigBytes = 4 * 1024 * 1024;
+
 inline Section open_root(const std::filesystem::path& file, YAML::Node& holder) {
+  // Read through read_regular_file: a FIFO or device named as a config is refused, never waited on.
+  const std::string text = read_regular_file(file, kMaxConfigBytes);
   try {
-    holder = YAML::LoadFile(file.string());
-  } catch (const YAML::BadFile&) {
-    throw ConfigError(file.string() + ": cannot open file");
+    holder = YAML::Load(text);
   } catch (const YAML::DeepRecursion& e) {
     throw ConfigError(file.string() + ": nested deeper than a configuration ever needs, at line " + std::to_string(e.mark.line + 1));
   } catch (const YAML::Exception& e) {

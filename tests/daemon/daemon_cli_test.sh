@@ -35,7 +35,8 @@ write_config "{driver: sim}" "$JOBS}"
 sed -i 's|planner: .*|planner: /nonexistent/planner.yaml|' "$W/scancelld.yaml"
 out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
 [ $rc = 4 ] && echo "$out" | grep -q "planner: no such file" || fail "missing file: exit $rc: $out"
-write_config "{driver: sim}" "$JOBS}"
+mkdir -p "$W/inbox"
+write_config "{driver: sim}" "$JOBS, allowed_dirs: [$SRC/tests/data, $W/inbox]}"
 
 # 2. Start on simulated drives; watch LCM from another process.
 start_sim
@@ -60,6 +61,18 @@ out=$(ctl watch 99 2>&1); rc=$?
 [ $rc = 1 ] && echo "$out" | grep -q "no job 99" || fail "unknown job: exit $rc: $out"
 out=$(ctl resume 99 2>&1); [ $? = 1 ] || fail "resume of an unknown job accepted"
 ctl status > /dev/null || fail "status after bad requests"
+# Issue 16, defect 5: a FIFO named as a spec blocked a daemon thread (and later its shutdown); files outside
+# jobs.allowed_dirs are refused unread; a refusal does not quote what a client-named file holds.
+mkfifo "$W/inbox/spec.yaml"
+out=$(timeout 10 "$BUILD/tools/scancellctl" --socket "$W/control.sock" submit --mesh "$SRC/tests/data/cube50.off" --spec "$W/inbox/spec.yaml" 2>&1); rc=$?
+[ $rc = 1 ] && echo "$out" | grep -q "spec.yaml' is a FIFO, not a regular file" || fail "FIFO spec: exit $rc: $out"
+printf 'precision_mm: 0.05\ndensity_per_mm2: 2\n' > "$W/outside.yaml"
+out=$(ctl submit --mesh "$SRC/tests/data/cube50.off" --spec "$W/outside.yaml" 2>&1); rc=$?
+[ $rc = 1 ] && echo "$out" | grep -q "outside jobs.allowed_dirs" || fail "file outside allowed_dirs: exit $rc: $out"
+printf 'precision_mm: hunter2-secret\ndensity_per_mm2: 2\n' > "$W/inbox/bad-spec.yaml"
+out=$(ctl submit --mesh "$SRC/tests/data/cube50.off" --spec "$W/inbox/bad-spec.yaml" 2>&1); rc=$?
+[ $rc = 1 ] && echo "$out" | grep -q "precision_mm" || fail "bad spec: exit $rc: $out"
+echo "$out" | grep -q "hunter2" && fail "the refusal quoted the file's content: $out"
 
 # 4. A job: pause at a safe point, resume, abort.
 ctl submit --mesh "$SRC/tests/data/cube50.off" --rough-vertices 400 > /dev/null || fail "submit"
