@@ -27,6 +27,11 @@ const char* to_string(DriverError::Kind k);
 /// velocity that is not a finite non-negative number (0: the configured profile velocity).
 void check_move_request(const std::string& axis, double target, double velocity);
 
+/// `value` (mm, rad, or per second) in drive counts, refused (DriverError refused, naming the value and the
+/// counts_per_unit setting) when it does not fit the drive's signed 32-bit register: 3,000,000 mm/s at 1000
+/// counts/mm was sent as -1,294,967,296.
+std::int32_t to_counts(const std::string& axis, const std::string& what, double value, double counts_per_unit);
+
 struct AxisState {
   double position = 0.0;  // mm or rad
   double velocity = 0.0;  // per second

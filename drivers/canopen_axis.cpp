@@ -261,11 +261,12 @@ void CanOpenAxis::home(std::chrono::milliseconds timeout) {
 void CanOpenAxis::begin_move(double target, double velocity) {
   refuse_if_faulted("move");
   check_move_request(cfg_.name, target, velocity);
-  const auto counts = static_cast<std::int32_t>(std::llround(target * cfg_.counts_per_unit));
+  const std::int32_t counts = to_counts(cfg_.name, "move target", target, cfg_.counts_per_unit);
   const double v = velocity > 0.0 ? velocity : cfg_.profile_velocity;
+  const std::int32_t vel = to_counts(cfg_.name, "move velocity", v, cfg_.counts_per_unit);  // before anything is sent
   sdo_write(kModes, 0, 1, 1);  // profile position
   sdo_write(kTarget, 0, static_cast<std::uint32_t>(counts), 4);
-  sdo_write(kProfileVelocity, 0, static_cast<std::uint32_t>(std::llround(v * cfg_.counts_per_unit)), 4);
+  sdo_write(kProfileVelocity, 0, static_cast<std::uint32_t>(vel), 4);
   // New set-point handshake: raise bit 4, wait for the acknowledge, lower it; finish_move waits for the target.
   sdo_write(kControlword, 0, kCwEnableOp | kCwNewSetpoint, 2);
   wait_status(kSwSetpointAck, kSwSetpointAck, std::chrono::milliseconds(500), "set-point acknowledge");

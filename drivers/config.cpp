@@ -19,6 +19,11 @@ void scaling(Section& s, double& counts, double& velocity) {
   if (mm == rad) s.fail(s.key_path("counts_per_mm"), "give counts_per_mm (linear) or counts_per_rad (rotary), one of them");
   counts = s.positive(mm ? "counts_per_mm" : "counts_per_rad");
   velocity = s.positive(mm ? "profile_velocity_mm_s" : "profile_velocity_rad_s");
+  if (!(counts <= 1e7)) s.fail(s.key_path(mm ? "counts_per_mm" : "counts_per_rad"), "must be at most 1e7");
+  // The drive's velocity register is 32-bit signed (checked again on every move).
+  if (!(velocity * counts < 2147483647.0))
+    s.fail(s.key_path(mm ? "profile_velocity_mm_s" : "profile_velocity_rad_s"),
+           "times the counts per unit exceeds the drive's 32-bit velocity register");
 }
 
 LineConfig line(Section s) {
@@ -62,10 +67,9 @@ DriverSetup load_driver_setup(const std::filesystem::path& file) {
       if (c.unit_id < 1 || c.unit_id > 247) a.fail(a.key_path("unit_id"), "must be in [1, 247]");
       scaling(a, c.counts_per_unit, c.profile_velocity);
       c.response_timeout = ms(a, "response_timeout_ms", c.response_timeout);
-      c.retries = a.get_or<int>("retries", c.retries);
-      if (c.retries < 0 || c.retries > 20) a.fail(a.key_path("retries"), "must be in [0, 20]");
+      c.retries = a.ranged<int>("retries", c.retries, 0, 20);
       c.reconnect_backoff = ms(a, "reconnect_backoff_ms", c.reconnect_backoff);
-      c.reconnect_attempts = a.get_or<int>("reconnect_attempts", c.reconnect_attempts);
+      c.reconnect_attempts = a.ranged<int>("reconnect_attempts", c.reconnect_attempts, 1, 10);
       a.finish();
       d.axes[name] = c;
     } else if (kind == "canopen") {

@@ -16,6 +16,9 @@ namespace mm = modbus_map;
 namespace {
 
 bool transient(int err) { return err == ETIMEDOUT || err == EMBXSBUSY || err == EMBBADCRC || err == EMBXACK; }
+/// A reply that does not answer the request sent (a late reply to an earlier request, a wrong function or
+/// length): the link is out of step and must be resynchronised before it is trusted again.
+bool out_of_step(int err) { return err == EMBBADDATA; }
 bool connection_lost(int err) {
   return err == ECONNRESET || err == EPIPE || err == EBADF || err == ECONNREFUSED || err == ENOTCONN || err == EIO;
 }
@@ -98,42 +101,89 @@ void ModbusAxis::refuse_if_faulted(const std::string& what) const {
   if (faulted_) throw DriverError(DriverError::Kind::refused, cfg_.name, what, "axis is faulted: reset_fault() first");
 }
 
+void ModbusAxis::pause(std::chrono::milliseconds d) {
+  const auto until = std::chrono::steady_clock::now() + d;
+  while (std::chrono::steady_clock::now() < until) {
+    if (halt_waiting_) return;
+    std::this_thread::sleep_for(std::min<std::chrono::milliseconds>(d, std::chrono::milliseconds(5)));
+  }
+}
+
+void ModbusAxis::give_way_to_halt(const std::string& where) {
+  if (halt_waiting_) fail(DriverError::Kind::connection, where, "gave way to a halt from another thread");
+}
+
 void ModbusAxis::reconnect(const std::string& where) {
-  auto backoff = cfg_.reconnect_backoff;
-  for (int attempt = 0; attempt < cfg_.reconnect_attempts; ++attempt) {
-    std::this_thread::sleep_for(backoff);
-    backoff *= 2;
+  while (true) {
+    if (reconnects_in_row_ >= cfg_.reconnect_attempts) {
+      if (ctx_) {  // the next transaction starts with a connect, not on the dead link
+        modbus_close(ctx_);
+        modbus_free(ctx_);
+        ctx_ = nullptr;
+      }
+      fail(DriverError::Kind::connection, where,
+           "connection lost; " + std::to_string(reconnects_in_row_) +
+               " reconnects in a row gave no working link (the peer accepts and drops it, or is gone; "
+               "reconnect_attempts " + std::to_string(cfg_.reconnect_attempts) + ")");
+    }
+    pause(cfg_.reconnect_backoff * (1 << std::min(reconnects_in_row_, 10)));
+    ++reconnects_in_row_;
+    give_way_to_halt(where);
     try {
       connect();
       return;
     } catch (const DriverError&) {
     }
   }
-  fail(DriverError::Kind::connection, where, "connection lost, " + std::to_string(cfg_.reconnect_attempts) + " reconnects failed");
+}
+
+void ModbusAxis::resync(const std::string& where) {
+  if (cfg_.transport == ModbusConfig::Transport::tcp) {
+    // A fresh connection: whatever late replies the old one still carries are gone with it.
+    modbus_close(ctx_);
+    modbus_free(ctx_);
+    ctx_ = nullptr;
+    reconnect(where);
+  } else {
+    // One line: wait out what is still on its way, then drop it.
+    pause(cfg_.response_timeout);
+    modbus_flush(ctx_);
+  }
 }
 
 void ModbusAxis::read(int addr, int n, std::uint16_t* out, const std::string& what) {
   // One transaction at a time on the context: the e-stop's halt may come from another thread mid-move.
-  std::lock_guard<std::recursive_mutex> lock(io_);
+  std::lock_guard<std::recursive_timed_mutex> lock(io_);
   if (!ctx_) reconnect(register_name(addr));
   for (int attempt = 0;; ++attempt) {
-    if (modbus_read_registers(ctx_, addr, n, out) == n) return;
+    if (modbus_read_registers(ctx_, addr, n, out) == n) {
+      reconnects_in_row_ = 0;
+      return;
+    }
     const int err = errno;
+    give_way_to_halt(register_name(addr));
     if (connection_lost(err)) {
       reconnect(register_name(addr));
-      continue;  // reads are safe to repeat
+      continue;  // reads are safe to repeat; reconnect() bounds how often
+    }
+    if (out_of_step(err)) {
+      resync(register_name(addr));  // before retrying, and before giving up: the link must not stay shifted
+      if (attempt < cfg_.retries) continue;
     }
     if (transient(err) && attempt < cfg_.retries) continue;
-    fail(transient(err) ? DriverError::Kind::timeout : DriverError::Kind::exception, register_name(addr),
-         what + ": " + modbus_strerror(err));
+    fail(transient(err) ? DriverError::Kind::timeout : out_of_step(err) ? DriverError::Kind::protocol : DriverError::Kind::exception,
+         register_name(addr), what + ": " + modbus_strerror(err));
   }
 }
 
 void ModbusAxis::write(int addr, int n, const std::uint16_t* values, const std::string& what) {
-  std::lock_guard<std::recursive_mutex> lock(io_);
+  std::lock_guard<std::recursive_timed_mutex> lock(io_);
   if (!ctx_) reconnect(register_name(addr));
   for (int attempt = 0;; ++attempt) {
-    if (modbus_write_registers(ctx_, addr, n, values) == n) return;
+    if (modbus_write_registers(ctx_, addr, n, values) == n) {
+      reconnects_in_row_ = 0;
+      return;
+    }
     const int err = errno;
     if (connection_lost(err)) {
       // The write may or may not have reached the drive: reconnect, but let the caller decide from the state.
@@ -141,6 +191,14 @@ void ModbusAxis::write(int addr, int n, const std::uint16_t* values, const std::
       fail(DriverError::Kind::connection, register_name(addr),
            what + ": connection lost during the write; reconnected, command not re-sent");
     }
+    if (out_of_step(err)) {
+      // The reply answered an earlier request; this write has most likely reached the drive. Resynchronise
+      // so the next transaction (reset_fault, a state read) is answered by its own reply.
+      resync(register_name(addr));
+      fail(DriverError::Kind::protocol, register_name(addr),
+           what + ": the reply did not answer this request (a late reply); link resynchronised, command not re-sent");
+    }
+    give_way_to_halt(register_name(addr));
     if (transient(err) && attempt < cfg_.retries) continue;
     fail(transient(err) ? DriverError::Kind::timeout : DriverError::Kind::exception, register_name(addr),
          what + ": " + modbus_strerror(err));
@@ -206,9 +264,9 @@ void ModbusAxis::home(std::chrono::milliseconds timeout) {
 void ModbusAxis::begin_move(double target, double velocity) {
   refuse_if_faulted("move");
   check_move_request(cfg_.name, target, velocity);
-  const auto counts = static_cast<std::int32_t>(std::llround(target * cfg_.counts_per_unit));
+  const std::int32_t counts = to_counts(cfg_.name, "move target", target, cfg_.counts_per_unit);
   const double v = velocity > 0.0 ? velocity : cfg_.profile_velocity;
-  const auto vel = static_cast<std::int32_t>(std::llround(v * cfg_.counts_per_unit));
+  const std::int32_t vel = to_counts(cfg_.name, "move velocity", v, cfg_.counts_per_unit);
   std::uint16_t tv[2];
   mm::put_i32(tv, 0, counts);
   write(mm::kTargetHi, 2, tv, "move target");
@@ -231,9 +289,26 @@ void ModbusAxis::finish_move(double target, std::chrono::milliseconds timeout) {
 
 void ModbusAxis::stop() { command(mm::kStop, "stop"); }
 
-void ModbusAxis::halt() { command(mm::kHalt, "halt"); }
+void ModbusAxis::halt() {
+  // A transaction of another thread may hold io_ for its retries and reconnects (seconds on a misbehaving
+  // link): it sees halt_waiting_ at its next step and gives way, so the halt waits at most about one
+  // response timeout for the lock.
+  halt_waiting_ = true;
+  std::unique_lock<std::recursive_timed_mutex> lock(io_, std::defer_lock);
+  const auto wait = cfg_.response_timeout * 4 + std::chrono::milliseconds(100);
+  const bool got = lock.try_lock_for(wait);
+  halt_waiting_ = false;
+  if (!got)
+    throw DriverError(DriverError::Kind::timeout, cfg_.name, "halt",
+                      "the link stayed busy for " + std::to_string(wait.count()) + " ms; halt not sent");
+  command(mm::kHalt, "halt");
+}
 
 void ModbusAxis::reset_fault() {
+  {
+    std::lock_guard<std::recursive_timed_mutex> lock(io_);
+    reconnects_in_row_ = 0;  // an explicit reset tries the link afresh
+  }
   faulted_ = false;
   command(mm::kResetFault, "reset fault");
 }
@@ -270,6 +345,15 @@ void check_move_request(const std::string& axis, double target, double velocity)
   if (!std::isfinite(target)) throw DriverError(DriverError::Kind::refused, axis, "move", "target is not finite");
   if (!std::isfinite(velocity) || velocity < 0.0)
     throw DriverError(DriverError::Kind::refused, axis, "move", "velocity is not a finite non-negative number");
+}
+
+std::int32_t to_counts(const std::string& axis, const std::string& what, double value, double counts_per_unit) {
+  const double c = std::round(value * counts_per_unit);
+  if (!(c >= -2147483648.0 && c <= 2147483647.0))
+    throw DriverError(DriverError::Kind::refused, axis, what,
+                      std::to_string(value) + " is " + std::to_string(c) +
+                          " counts, outside the drive's 32-bit range (check counts_per_unit, " + std::to_string(counts_per_unit) + ")");
+  return static_cast<std::int32_t>(c);
 }
 
 void Positioner::check_target(const std::string& n, double t) const {
@@ -317,14 +401,25 @@ void Positioner::move(const std::map<std::string, double>& targets, std::chrono:
 }
 
 std::vector<std::string> Positioner::halt_all() {
-  std::vector<std::string> errors;
+  // Every axis at once: one misbehaving link must not delay the halt of the others.
+  std::vector<std::string> slots(axes_.size());
+  std::vector<std::thread> haltors;
+  std::size_t k = 0;
   for (auto& [n, e] : axes_) {
-    try {
-      e.axis->halt();
-    } catch (const DriverError& err) {
-      errors.push_back(err.what());
-    }
+    Axis* a = e.axis.get();
+    std::string* slot = &slots[k++];
+    haltors.emplace_back([a, slot] {
+      try {
+        a->halt();
+      } catch (const std::exception& err) {
+        *slot = err.what();
+      }
+    });
   }
+  for (auto& t : haltors) t.join();
+  std::vector<std::string> errors;
+  for (auto& s : slots)
+    if (!s.empty()) errors.push_back(std::move(s));
   return errors;
 }
 

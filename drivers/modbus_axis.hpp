@@ -2,7 +2,9 @@
 // An axis on a Modbus drive (libmodbus, TCP or RTU) speaking the register map of docs/modbus-register-map.md.
 // Transient errors (timeout, slave busy, bad CRC) retry within the budget, then the axis faults; a lost
 // connection reconnects with backoff and the axis re-reads the drive's state before anything else — a move is
-// never re-sent blindly.
+// never re-sent blindly. A reply out of step with its request (a late reply to an earlier one) resynchronises
+// the link (TCP: a fresh connection; RTU: the line drained) instead of shifting every later reply by one.
+#include <atomic>
 #include <chrono>
 #include <mutex>
 #include <string>
@@ -27,6 +29,8 @@ struct ModbusConfig {
   std::chrono::milliseconds response_timeout{150};
   int retries = 2;                         // extra attempts for transient errors
   std::chrono::milliseconds reconnect_backoff{50};  // doubled per attempt
+  /// Reconnects in a row without one successful transaction between them: a peer that accepts and closes at
+  /// once "reconnects" every time, so a working link, not a connect, resets the count.
   int reconnect_attempts = 3;
   std::chrono::milliseconds poll_period{5};
 };
@@ -45,6 +49,8 @@ class ModbusAxis : public Axis {
   void begin_move(double target, double velocity = 0.0) override;
   void finish_move(double target, std::chrono::milliseconds timeout) override;
   void stop() override;
+  /// Reaches the drive within a bounded time even while another thread's transaction is stuck retrying or
+  /// reconnecting: that transaction gives way (fails "gave way to a halt") and the halt goes out next.
   void halt() override;
   void reset_fault() override;
   AxisState state() override;
@@ -54,6 +60,9 @@ class ModbusAxis : public Axis {
  private:
   void connect();
   void reconnect(const std::string& where);
+  void resync(const std::string& where);
+  void pause(std::chrono::milliseconds d);
+  void give_way_to_halt(const std::string& where);
   void read(int addr, int n, std::uint16_t* out, const std::string& what);
   void write(int addr, int n, const std::uint16_t* values, const std::string& what);
   void command(std::uint16_t cmd, const std::string& what);
@@ -62,9 +71,11 @@ class ModbusAxis : public Axis {
   void refuse_if_faulted(const std::string& what) const;
 
   ModbusConfig cfg_;
-  std::recursive_mutex io_;  // serialises transactions (reconnect nests inside read/write)
+  std::recursive_timed_mutex io_;  // serialises transactions (reconnect nests inside read/write)
   _modbus* ctx_ = nullptr;
-  bool faulted_ = false;
+  std::atomic<bool> faulted_{false};
+  std::atomic<bool> halt_waiting_{false};  // a halt waits for io_: retries and reconnects stop
+  int reconnects_in_row_ = 0;              // under io_; reset by a successful transaction
 };
 
 }  // namespace scancell::drivers

@@ -6,7 +6,8 @@
 // per port, as a cell's drives each have their own address), or one on a new pseudo-terminal with --rtu (its
 // path is printed). Faults can be chosen at start (--fault, every drive) or at run time by writing "FAULT" (drive
 // 0) or "K FAULT" (drive K) to standard input: none, no_reply, illegal_address, busy_once, device_failure,
-// stall, drop_connection, following_error, corrupt_once (RTU: a reply with a wrong CRC). --no-stdin: run until
+// stall, drop_connection, following_error, corrupt_once (RTU: a reply with a wrong CRC), accept_and_close,
+// late_reply_once. --no-stdin: run until
 // SIGINT/SIGTERM whatever standard input does (background use, the demo).
 // `can` serves one simulated CiA 402 drive (node N, default 1) on a SOCK_SEQPACKET Unix socket at PATH carrying
 // struct can_frame records (the drivers' CanLink::open("unix:PATH")); faults from standard input: none,
@@ -45,6 +46,8 @@ const std::map<std::string, sim::ModbusFault> kFaults = {
     {"drop_connection", sim::ModbusFault::drop_connection},
     {"following_error", sim::ModbusFault::following_error},
     {"corrupt_once", sim::ModbusFault::corrupt_once},
+    {"accept_and_close", sim::ModbusFault::accept_and_close},
+    {"late_reply_once", sim::ModbusFault::late_reply_once},
 };
 
 const std::map<std::string, sim::CanFault> kCanFaults = {

@@ -165,6 +165,10 @@ bool ModbusDriveSim::handle(void* ctxv, const std::uint8_t* req, int len) {
     ++corrupt_sent_;
     return true;
   }
+  if (f == ModbusFault::late_reply_once) {
+    fault_ = ModbusFault::none;
+    std::this_thread::sleep_for(std::chrono::milliseconds(150));  // then answered as usual, too late
+  }
   if (f == ModbusFault::busy_once) {
     fault_ = ModbusFault::none;
     modbus_reply_exception(ctx, req, MODBUS_EXCEPTION_SLAVE_OR_SERVER_BUSY);
@@ -241,10 +245,17 @@ void ModbusDriveSim::run_tcp(int listen_fd) {
     const auto now = Clock::now();
     step(std::chrono::duration<double>(now - last).count());
     last = now;
+    const bool dropping = fault_ == ModbusFault::accept_and_close;
+    if (dropping && client >= 0) {
+      ::close(client);
+      client = -1;
+    }
     if (n <= 0) continue;
     if (FD_ISSET(listen_fd, &set)) {
       const int c = ::accept(listen_fd, nullptr, nullptr);
-      if (c >= 0) {
+      if (c >= 0 && dropping) {
+        ::close(c);
+      } else if (c >= 0) {
         if (client >= 0) ::close(client);
         client = c;
       }

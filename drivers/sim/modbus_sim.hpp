@@ -22,6 +22,8 @@ enum class ModbusFault {
   drop_connection,    // the connection is closed right after the next move command is answered
   following_error,    // the next move raises the drive's fault bit (following error)
   corrupt_once,       // RTU: the next reply goes out with a wrong CRC
+  accept_and_close,   // TCP: the connection is dropped, and every new one is accepted and closed at once
+  late_reply_once,    // the next reply is held 150 ms (past a 100 ms response timeout), then sent
 };
 
 struct DriveParams {

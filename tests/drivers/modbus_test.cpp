@@ -4,6 +4,8 @@
 #include <chrono>
 #include <cstdlib>
 #include <functional>
+#include <future>
+#include <thread>
 #include <cstdio>
 #include <random>
 #include <string>
@@ -199,6 +201,110 @@ TEST(Modbus, LostConnectionReconnectsAndNeverResendsTheMove) {
   axis.move_to(20.0, 3000ms);  // the status polls find the link gone, reconnect, re-read: the move is running
   EXPECT_DOUBLE_EQ(axis.state().position, 20.0);
   EXPECT_EQ(count_of(drive.commands(), dr::modbus_map::kMove), 1u);
+}
+
+// Issue 16, defect 7. A peer that accepts and drops every connection made reconnect() "succeed" each time,
+// so one state() looped for ever. Reconnects now count until a transaction succeeds.
+TEST(Modbus, APeerThatAcceptsAndDropsEndsInAConnectionErrorNotALoop) {
+  sim::ModbusDriveSim drive;
+  dr::ModbusAxis axis(tcp_config(drive.serve_tcp()));
+  EXPECT_FALSE(axis.state().enabled);
+  drive.inject(sim::ModbusFault::accept_and_close);
+  auto f = std::async(std::launch::async, [&] {
+    try {
+      axis.state();
+      return std::string("state() succeeded");
+    } catch (const dr::DriverError& e) {
+      return std::string(dr::to_string(e.kind)) + ": " + e.cause;
+    }
+  });
+  if (f.wait_for(20s) != std::future_status::ready) {
+    ADD_FAILURE() << "state() still reconnecting after 20 s";
+    std::abort();  // the loop would hold the test for ever
+  }
+  const std::string r = f.get();
+  EXPECT_THAT(r, HasSubstr("connection: connection lost; 3 reconnects in a row gave no working link"));
+  EXPECT_THAT(r, HasSubstr("reconnect_attempts 3"));
+  // The peer behaves again: reset_fault() reconnects and the axis works.
+  drive.inject(sim::ModbusFault::none);
+  axis.reset_fault();
+  EXPECT_FALSE(axis.state().faulted);
+}
+
+// A halt reaches every axis while another thread is stuck reconnecting one of them: the stuck transaction
+// gives way, and Positioner::halt_all halts the axes in parallel (it halted them one after another, each
+// behind its I/O lock: 23 s and more on a misbehaving link).
+TEST(Modbus, AHaltReachesEveryAxisWhileOneLinkMisbehaves) {
+  sim::ModbusDriveSim good_drive, bad_drive;
+  auto bad_cfg = tcp_config(bad_drive.serve_tcp());
+  bad_cfg.name = "table";
+  bad_cfg.reconnect_attempts = 8;  // 0.05 + 0.1 + ... + 6.4 s of backoff: 12.75 s if nothing gives way
+  auto good = std::make_unique<dr::ModbusAxis>(tcp_config(good_drive.serve_tcp()));
+  auto bad = std::make_unique<dr::ModbusAxis>(bad_cfg);
+  dr::ModbusAxis* bad_axis = bad.get();
+  good->enable();
+  good->home(2000ms);
+  dr::Positioner pos;
+  pos.add(std::move(good), {-100.0, 100.0});
+  pos.add(std::move(bad), {-100.0, 100.0});
+  bad_drive.inject(sim::ModbusFault::accept_and_close);
+  std::string stuck_error;
+  std::thread poller([&] {
+    try {
+      bad_axis->state();
+    } catch (const dr::DriverError& e) {
+      stuck_error = e.cause;
+    }
+  });
+  std::this_thread::sleep_for(300ms);  // the poller is in its reconnect backoff, holding the axis' link
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto errors = pos.halt_all();
+  const double took_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  poller.join();
+  EXPECT_LT(took_s, 5.0) << "halt_all waited behind the stuck link";
+  EXPECT_EQ(count_of(good_drive.commands(), dr::modbus_map::kHalt), 1u);  // the good axis was halted
+  ASSERT_EQ(errors.size(), 1u);  // the bad one could not be, and says so
+  EXPECT_THAT(errors[0], HasSubstr("table"));
+  EXPECT_THAT(stuck_error, HasSubstr("gave way to a halt"));
+}
+
+// A reply that comes after its request timed out answered the retry instead, and every later read was
+// shifted by one ("invalid data" for ever, reset_fault() could not recover). The link is resynchronised.
+TEST(Modbus, ALateReplyResynchronisesTheLinkInsteadOfShiftingEveryReply) {
+  sim::ModbusDriveSim drive;
+  dr::ModbusAxis axis(tcp_config(drive.serve_tcp()));  // 100 ms response timeout; the late reply takes 150
+  axis.enable();
+  axis.home(2000ms);
+  axis.move_to(5.0, 2000ms);
+  drive.inject(sim::ModbusFault::late_reply_once);
+  const auto s = axis.state();
+  EXPECT_DOUBLE_EQ(s.position, 5.0);
+  EXPECT_TRUE(s.enabled);
+  EXPECT_FALSE(axis.faulted());
+  for (int k = 0; k < 5; ++k) EXPECT_DOUBLE_EQ(axis.state().position, 5.0);  // in step
+  axis.move_to(7.0, 2000ms);
+  EXPECT_DOUBLE_EQ(axis.state().position, 7.0);
+}
+
+// Issue 16, lesser finding: a velocity or target whose counts do not fit 32 bits wrapped (3,000,000 mm/s went
+// out as -1,294,967,296). The driver refuses it, naming the value and counts_per_unit, and sends nothing.
+TEST(Modbus, ValuesThatDoNotFitTheDrivesRegistersAreRefusedNotWrapped) {
+  sim::ModbusDriveSim drive;
+  dr::ModbusAxis axis(tcp_config(drive.serve_tcp()));
+  axis.enable();
+  axis.home(2000ms);
+  const auto before = drive.commands().size();
+  try {
+    axis.begin_move(5.0, 3'000'000.0);
+    FAIL() << "sent";
+  } catch (const dr::DriverError& e) {
+    EXPECT_EQ(e.kind, dr::DriverError::Kind::refused);
+    EXPECT_THAT(e.what(), HasSubstr("move velocity: 3000000.000000 is 3000000000.000000 counts, outside the drive's 32-bit range"));
+    EXPECT_THAT(e.what(), HasSubstr("counts_per_unit"));
+  }
+  EXPECT_EQ(kind_of([&] { axis.begin_move(2.2e6, 0.0); }), dr::DriverError::Kind::refused);  // 2.2e9 counts
+  EXPECT_EQ(drive.commands().size(), before);
+  EXPECT_EQ(dr::to_counts("x", "t", -2147483.648, 1000.0), INT32_MIN);  // the edge still fits
 }
 
 TEST(Modbus, SoftLimitsRefuseBeforeAnythingIsSent) {
