@@ -77,6 +77,7 @@ Daemon::Daemon(DaemonConfig config) : config_(std::move(config)) {
   data_lock_ = std::make_unique<InstanceLock>(config_.data_dir / "scancelld.lock");
   socket_lock_ = std::make_unique<InstanceLock>(config_.socket_path.string() + ".lock");
   journal_ = std::make_unique<Journal>(config_.data_dir);
+  fs::permissions(config_.data_dir, fs::perms::owner_all | fs::perms::group_read | fs::perms::group_exec);  // 0750
   telemetry_ = std::make_unique<Telemetry>(config_.lcm_url);
   io_ = open_cell_io(config_.models.cell, config_.drivers, config_.drivers_file.string());
   bring_up(*io_, config_.models.cell, config_.home_timeout);
@@ -255,7 +256,7 @@ json Daemon::handle(const json& req, const std::function<bool(const json&)>& sen
     r.truth = client_file(req, "truth", config_.allowed_dirs);
     r.fit_mm = req.value("fit_mm", 0.0);
     if (req.contains("bbox_mm")) r.bbox_mm = Eigen::Vector3d(req["bbox_mm"][0].get<double>(), req["bbox_mm"][1].get<double>(), req["bbox_mm"][2].get<double>());
-    if (r.bbox_mm && r.truth.empty() && config_.scanner_driver == "sim")
+    if (r.bbox_mm && r.mesh.empty() && r.truth.empty() && config_.scanner_driver == "sim")
       throw std::invalid_argument("submit: a bounding-box job on the simulated scanner needs 'truth' (what stands on the table)");
     if (req.contains("rough_vertices")) {
       const auto n = req["rough_vertices"].get<std::int64_t>();

@@ -11,6 +11,7 @@
 #include <string>
 
 #include <signal.h>
+#include <sys/stat.h>
 
 #include "daemon/daemon.hpp"
 #include "planner/errors.hpp"
@@ -76,6 +77,9 @@ int main(int argc, char** argv) {
   sigaddset(&set, SIGINT);
   sigaddset(&set, SIGHUP);
   pthread_sigmask(SIG_BLOCK, &set, nullptr);
+  // The journal, its WAL, scans and reports are the cell's data: owner and group only (directories 0750,
+  // files 0640; issue 16 found them 0644). The socket is made 0660 explicitly.
+  ::umask(027);
   std::signal(SIGPIPE, SIG_IGN);
   scancell::daemon::DaemonConfig cfg;
   try {

@@ -132,6 +132,25 @@ void ModbusDriveSim::step(double dt) {
   regs[mm::kHeartbeat] = heartbeat_;
 }
 
+unsigned ModbusDriveSim::refuse_write(void* ctxv, const std::uint8_t* req, int len) const {
+  auto* ctx = static_cast<modbus_t*>(ctxv);
+  const int off = modbus_get_header_length(ctx);  // unit id (RTU) or MBAP header (TCP), then the function
+  if (len < off + 5) return 0;
+  const int function = req[off];
+  if (function != 0x06 && function != 0x10) return 0;
+  const int addr = (req[off + 1] << 8) | req[off + 2];
+  const int count = function == 0x06 ? 1 : ((req[off + 3] << 8) | req[off + 4]);
+  auto writable = [](int a) { return a == mm::kCommand || a == mm::kTargetHi || a == mm::kTargetHi + 1 || a == mm::kVelocityHi || a == mm::kVelocityHi + 1; };
+  for (int a = addr; a < addr + count; ++a)
+    if (a >= mm::kCount || !writable(a)) return MODBUS_EXCEPTION_ILLEGAL_DATA_ADDRESS;
+  // A write of the velocity's high word (function 16, both words) with the sign bit set: negative.
+  if (function == 0x10 && addr <= mm::kVelocityHi && addr + count > mm::kVelocityHi) {
+    const int k = off + 6 + 2 * (mm::kVelocityHi - addr);  // values follow the byte count
+    if (k < len && (req[k] & 0x80)) return MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE;
+  }
+  return 0;
+}
+
 bool ModbusDriveSim::handle(void* ctxv, const std::uint8_t* req, int len) {
   auto* ctx = static_cast<modbus_t*>(ctxv);
   const ModbusFault f = fault_;
@@ -172,6 +191,14 @@ bool ModbusDriveSim::handle(void* ctxv, const std::uint8_t* req, int len) {
   if (f == ModbusFault::busy_once) {
     fault_ = ModbusFault::none;
     modbus_reply_exception(ctx, req, MODBUS_EXCEPTION_SLAVE_OR_SERVER_BUSY);
+    return true;
+  }
+  // As strict as a drive: a write that touches a read-only register (status, actual position and velocity,
+  // fault code, heartbeat) is answered with exception 2, and a negative profile velocity with exception 3;
+  // neither changes anything.
+  if (const auto refused = refuse_write(ctx, req, len)) {
+    ++refused_writes_;
+    modbus_reply_exception(ctx, req, refused);
     return true;
   }
   bool keep = true;

@@ -55,6 +55,8 @@ class ModbusDriveSim {
   std::vector<LoggedCommand> commands() const;
   std::size_t limit_violations() const { return violations_; }
   int corrupt_replies_sent() const { return corrupt_sent_; }
+  /// Writes refused as a drive would: to a read-only register, or a negative profile velocity.
+  int refused_writes() const { return refused_writes_; }
   std::int32_t actual_counts() const;
 
  private:
@@ -62,6 +64,8 @@ class ModbusDriveSim {
   void run_rtu(int master_fd);
   /// One request: returns false when the connection should be closed.
   bool handle(void* ctx, const std::uint8_t* req, int len);
+  /// The Modbus exception code a drive answers this write with, or 0 to accept it.
+  unsigned refuse_write(void* ctx, const std::uint8_t* req, int len) const;
   void step(double dt);
 
   DriveParams p_;
@@ -75,6 +79,7 @@ class ModbusDriveSim {
   int listen_fd_ = -1, pty_master_ = -1, pty_slave_ = -1;
   bool rtu_ = false;
   std::atomic<int> corrupt_sent_{0};
+  std::atomic<int> refused_writes_{0};
   // drive state (counts)
   double pos_ = 0.0, vel_ = 0.0;
   std::int32_t target_ = 0;

@@ -126,4 +126,10 @@ for ch in SCANCELL_STATUS SCANCELL_PROGRESS SCANCELL_AXIS_STATE SCANCELL_PLAN; d
   grep -aq "$ch" "$W/lcm.log" || fail "lcm-logger recorded no $ch"
 done
 "$BUILD/daemon/scancelld" --check "$W/data" > /dev/null || fail "journal inconsistent"
+# The cell's data is owner and group only: directories 0750, files 0640 (issue 16: they were 0644).
+[ "$(stat -c %a "$W/data")" = 750 ] || fail "data directory mode $(stat -c %a "$W/data")"
+loose=$(find "$W/data" \( -type f -perm /o=rwx \) -o \( -type d -perm /o=rwx \) | head -3)
+[ -z "$loose" ] || fail "world-accessible data: $loose"
+[ "$(stat -c %a "$W/data/journal.sqlite")" = 640 ] || fail "journal mode $(stat -c %a "$W/data/journal.sqlite")"
+[ -n "$(find "$W/data/scans" -type f | head -1)" ] || fail "no scans stored to check"
 echo "daemon_cli_test: all checks passed"

@@ -398,6 +398,23 @@ TEST(JobRequest, BadInputIsRefusedNamingTheFile) {
   r.fit_mm = 200;
   r.spec = src("config/sensors/line-scan-thesis.yaml");  // not a spec
   EXPECT_THROW(validate_request(r), sp::ConfigError);
+  // Issue 16, lesser findings: fit_mm was unchecked for bounding-box jobs, and mesh with bbox_mm was refused
+  // for something else.
+  auto refusal = [](const JobRequest& q) {
+    try {
+      validate_request(q);
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string("<accepted>");
+  };
+  JobRequest b;
+  b.bbox_mm = Eigen::Vector3d(100, 100, 50);
+  b.fit_mm = -5;
+  EXPECT_EQ(refusal(b), "submit: 'fit_mm' must be > 0");
+  b.fit_mm = 0;
+  b.mesh = src("tests/data/mushroom.off");
+  EXPECT_THAT(refusal(b), HasSubstr("'mesh' and 'bbox_mm' both given"));
 }
 
 }  // namespace

@@ -11,6 +11,7 @@
 #include <string>
 
 #include <gmock/gmock.h>
+#include <modbus/modbus.h>
 #include <gtest/gtest.h>
 
 #include "drivers/modbus_axis.hpp"
@@ -305,6 +306,34 @@ TEST(Modbus, ValuesThatDoNotFitTheDrivesRegistersAreRefusedNotWrapped) {
   EXPECT_EQ(kind_of([&] { axis.begin_move(2.2e6, 0.0); }), dr::DriverError::Kind::refused);  // 2.2e9 counts
   EXPECT_EQ(drive.commands().size(), before);
   EXPECT_EQ(dr::to_counts("x", "t", -2147483.648, 1000.0), INT32_MIN);  // the edge still fits
+}
+
+// Issue 16, lesser finding: the simulator accepted writes to read-only registers and a negative profile
+// velocity; a real drive answers them with exceptions, and so does the simulator now (a foreign client here).
+TEST(Modbus, TheSimulatedDriveRefusesWhatADriveRefuses) {
+  sim::ModbusDriveSim drive;
+  const int port = drive.serve_tcp();
+  modbus_t* c = modbus_new_tcp("127.0.0.1", port);
+  ASSERT_EQ(modbus_connect(c), 0);
+  modbus_set_slave(c, 1);
+  EXPECT_EQ(modbus_write_register(c, dr::modbus_map::kStatus, 0xFFFF), -1);
+  EXPECT_EQ(errno, EMBXILADD);
+  const std::uint16_t actual[2] = {0, 1000};
+  EXPECT_EQ(modbus_write_registers(c, dr::modbus_map::kActualHi, 2, actual), -1);
+  EXPECT_EQ(errno, EMBXILADD);
+  std::uint16_t negative[2];
+  dr::modbus_map::put_i32(negative, 0, -5000);
+  EXPECT_EQ(modbus_write_registers(c, dr::modbus_map::kVelocityHi, 2, negative), -1);
+  EXPECT_EQ(errno, EMBXILVAL);
+  std::uint16_t positive[2];
+  dr::modbus_map::put_i32(positive, 0, 5000);
+  EXPECT_EQ(modbus_write_registers(c, dr::modbus_map::kVelocityHi, 2, positive), 2);  // the writable ones work
+  std::uint16_t regs[dr::modbus_map::kCount];
+  ASSERT_EQ(modbus_read_registers(c, 0, dr::modbus_map::kCount, regs), dr::modbus_map::kCount);
+  EXPECT_EQ(dr::modbus_map::get_i32(regs, dr::modbus_map::kVelocityHi), 5000);
+  EXPECT_EQ(drive.refused_writes(), 3);
+  modbus_close(c);
+  modbus_free(c);
 }
 
 TEST(Modbus, SoftLimitsRefuseBeforeAnythingIsSent) {
