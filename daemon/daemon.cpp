@@ -125,8 +125,18 @@ void Daemon::job_loop() {
                                          const planner::CellModel& placed) {
       return make_sim_head(models.sensor, scene, object_triangles, seed, &placed, truth ? &*truth : nullptr);
     };
-    stop_ = 0;
-    current_ = *id;
+    // Claim the job. Under claim_mu_ a pause or abort either finds current_ set (and raises stop_, which is
+    // not cleared after this point) or has written its state to the journal first (and the re-read below
+    // skips the job): the request is never lost (issue 16, suspected race 2). A stop request left from an
+    // earlier job is cleared, a shutdown never: it may have come after running_ was checked (race 1).
+    {
+      std::lock_guard<std::mutex> claim(claim_mu_);
+      int s = stop_.load();
+      while (s != static_cast<int>(StopRequest::shutdown) && !stop_.compare_exchange_weak(s, 0)) {
+      }
+      if (!runnable(journal_->job(*id).state)) continue;
+      current_ = *id;
+    }
     notifier_.status("job " + std::to_string(*id) + " running");
     JobState end;
     const json request = json::parse(journal_->job(*id).request_json);
@@ -340,6 +350,7 @@ json Daemon::handle(const json& req, const std::function<bool(const json&)>& sen
     return job_json(journal_->job(j.id));
   }
   if (cmd == "pause" || cmd == "abort") {
+    std::lock_guard<std::mutex> claim(claim_mu_);  // see job_loop: the job is claimed, or not yet, not between
     const JobRecord j = job_of();
     if (current_ == j.id) {
       stop_ = static_cast<int>(cmd == "pause" ? StopRequest::pause : StopRequest::abort);

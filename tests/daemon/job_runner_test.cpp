@@ -266,6 +266,12 @@ TEST_F(SimCell, PauseStopsAtASafePointAndAbortEndsTheJob) {
   EXPECT_EQ(journal->job(job).state, JobState::paused);
   const std::size_t stored = stored_views(job);
   EXPECT_TRUE(journal->check().empty());
+  // Issue 16, suspected race 2: a job paused just before the runner starts it is not run (the runner used to
+  // run it, and the pause was lost).
+  stop = 0;
+  EXPECT_EQ(r.run(job, stop), JobState::paused);
+  EXPECT_EQ(stored_views(job), stored);
+  journal->set_state(job, JobState::queued, "resumed");  // what the daemon's resume does
   stop = static_cast<int>(StopRequest::abort);
   EXPECT_EQ(r.run(job, stop), JobState::aborted);
   EXPECT_EQ(stored_views(job), stored);  // nothing half-stored, nothing lost
