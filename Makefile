@@ -5,7 +5,7 @@ JOBS       ?= $(shell nproc)
 CMAKE      ?= cmake
 SCANCELL    = $(BUILD)/tools/scancell
 
-.PHONY: all deps build test test-asan demo demo-rough demo-offline kill-test bench quality quality-cell clean
+.PHONY: all deps build test test-asan fuzz demo demo-rough demo-offline kill-test bench quality quality-cell clean
 
 all: build
 
@@ -28,9 +28,20 @@ kill-test: build
 
 test-asan: deps
 	@$(CMAKE) -S . -B $(ASAN_BUILD) -DCMAKE_BUILD_TYPE=Debug "-DCMAKE_CXX_FLAGS_DEBUG=-O1 -g" -DSCANCELL_SANITIZE=ON -DSCANCELL_BUILD_BENCH=OFF > $(ASAN_BUILD).configure.log 2>&1 || (cat $(ASAN_BUILD).configure.log; exit 1)
-	@$(CMAKE) --build $(ASAN_BUILD) -j$(JOBS) --target planner_tests driver_tests daemon_tests calibration_tests
+	@$(CMAKE) --build $(ASAN_BUILD) -j$(JOBS) --target planner_tests driver_tests daemon_tests calibration_tests \
+	  fuzz_mesh fuzz_range_image fuzz_plan_file fuzz_config fuzz_control
 	LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp UBSAN_OPTIONS=print_stacktrace=1 \
-	  ctest --test-dir $(ASAN_BUILD) --output-on-failure -j$(JOBS) -L 'planner|drivers|daemon|calibration'
+	  ctest --test-dir $(ASAN_BUILD) --output-on-failure -j$(JOBS) -L 'planner|drivers|daemon|calibration|fuzz'
+
+# Open-ended fuzzing (not in CI): every target under libFuzzer with ASan+UBSan (clang), FUZZ_SECONDS each
+# (default 60), starting from the committed corpus and reproducers; new inputs land in build-fuzz/corpus/.
+FUZZ_BUILD   ?= build-fuzz
+FUZZ_SECONDS ?= 60
+fuzz: deps
+	@CC=clang CXX=clang++ $(CMAKE) -S . -B $(FUZZ_BUILD) -DCMAKE_BUILD_TYPE=Debug "-DCMAKE_CXX_FLAGS_DEBUG=-O1 -g" \
+	  -DSCANCELL_SANITIZE=ON -DSCANCELL_FUZZ=ON -DSCANCELL_BUILD_BENCH=OFF > $(FUZZ_BUILD).configure.log 2>&1 || (cat $(FUZZ_BUILD).configure.log; exit 1)
+	@$(CMAKE) --build $(FUZZ_BUILD) -j$(JOBS) --target fuzz_mesh fuzz_range_image fuzz_plan_file fuzz_config fuzz_control
+	scripts/fuzz.sh $(FUZZ_BUILD) $(FUZZ_SECONDS)
 
 # Until the daemon exists: plan the bundled example object, then execute the plan with the virtual scanner
 # on the fine model (verified measurability, coverage mesh and projection image).
