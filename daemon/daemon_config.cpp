@@ -145,6 +145,7 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
     c.jobs.planner_threads = s.get_or<int>("planner_threads", 0);
     if (c.jobs.planner_threads < 0) s.fail(s.key_path("planner_threads"), "must be >= 0 (0: all cores)");
     c.home_timeout = std::chrono::milliseconds(static_cast<long>(1000.0 * s.get_or<double>("home_timeout_s", 60.0)));
+    if (s.has("phase_trace_file")) c.jobs.phase_trace_file = relative_to(c.file, s.get<std::string>("phase_trace_file"));
     if (s.has("allowed_dirs")) {
       // The only directories a client's submit may name files in (mesh, truth, spec, settings); resolved
       // now, links included, so a client's path is compared with what it really is.

@@ -273,7 +273,7 @@ struct JobRunner::Job {
 JobRunner::JobRunner(Journal& journal, const CellModels& models, dr::Positioner& positioner, ScanHeadFactory heads,
                      JobSettings settings, Report report)
     : journal_(journal), models_(models), positioner_(positioner), heads_(std::move(heads)),
-      settings_(std::move(settings)), report_(std::move(report)) {
+      settings_(std::move(settings)), report_(std::move(report)), trace_(settings_.phase_trace_file) {
   bool sweep = false;
   for (const auto& a : models_.cell.axes) sweep = sweep || a.name == "sweep";
   if (!sweep)
@@ -282,6 +282,7 @@ JobRunner::JobRunner(Journal& journal, const CellModels& models, dr::Positioner&
 
 void JobRunner::transition(Job& j, JobState s, const std::string& cause) {
   journal_.set_state(j.id, s, cause);
+  trace_.mark(to_string(s));
   j.progress.state = s;
   j.progress.event = std::string(to_string(s)) + (cause.empty() ? "" : ": " + cause);
   report_(j.progress);
@@ -803,6 +804,7 @@ void JobRunner::execute_view(Job& j, std::int64_t plan, const ViewRecord& v, con
   j.progress.eta_s = remaining;
 
   const Acquisition got = acquire_view(positioner_, *j.head, cell, models_.sensor, q, L, settings_, stop, [&](const std::string& what) {
+    trace_.mark(what);
     j.progress.event = "view " + std::to_string(v.index + 1) + "/" + std::to_string(j.progress.views) + ": " + what;
     report_(j.progress);
   });
@@ -812,6 +814,7 @@ void JobRunner::execute_view(Job& j, std::int64_t plan, const ViewRecord& v, con
   // Register the view to the model before its coverage counts (thesis 1.1.4: the positioner's pose is not
   // good enough to trust the samples where it put them).
   std::string note, registration;
+  trace_.mark("registering");  // the sweep is over: from here to "stored" the view exists only in memory
   if (j.cloud) {
     // Rotations about each profile's laser origin: a camera orientation error shears a line scan.
     const sp::IcpResult r = sp::register_scan(sp::scan_samples(img), *j.cloud, settings_.icp);
@@ -833,7 +836,9 @@ void JobRunner::execute_view(Job& j, std::int64_t plan, const ViewRecord& v, con
     }
   }
   // Store (durable before it counts), then update the measured coverage and the model views register to.
+  trace_.mark("storing");
   journal_.store_scan(plan, v.index, sp::range_image_to_ply(img), note);
+  trace_.mark("stored");
   if (note.empty()) {
     j.coverage->add(img);
     if (j.cloud) {

@@ -19,6 +19,7 @@
 #include <nlohmann/json.hpp>
 
 #include "daemon/journal.hpp"
+#include "daemon/phase_trace.hpp"
 #include "drivers/axis.hpp"
 #include "drivers/gpio.hpp"
 #include "drivers/scanner.hpp"
@@ -93,6 +94,8 @@ struct JobSettings {
   /// rough model is off by a fraction of its voxel. Corrections are believed in proportion to the cell's
   /// pose-error model against this (planner::correction_weight).
   double fused_model_sigma_mm = 0.4;
+  /// jobs.phase_trace_file: where the running job is, a line per change (daemon/phase_trace.hpp); empty: none.
+  std::filesystem::path phase_trace_file;
 };
 
 /// The models a job plans and executes with (the daemon's configuration; defaults for spec and settings).
@@ -158,6 +161,7 @@ class JobRunner {
   ScanHeadFactory heads_;
   JobSettings settings_;
   Report report_;
+  PhaseTrace trace_;
 };
 
 /// A stop request honoured at a safe point (between moves or profiles).

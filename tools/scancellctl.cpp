@@ -117,7 +117,7 @@ void print_result(const json& reply, double seconds) {
   std::printf("  %-34s %.1f mm2 in %d rows\n", "not measured, measurable", num("open_area_mm2"), r.value("open_rows", 0));
   std::printf("  %-34s %d rows\n", "unmeasurable in this cell", r.value("unmeasurable_rows", 0));
   if (r.contains("needs_attention_rows"))
-    std::printf("  %-34s %.1f mm2 in %d rows (predicted measurable, not measured, twice)\n", "needs attention",
+    std::printf("  %-34s %.1f mm2 in %d rows (predicted measurable, never measured: retired)\n", "needs attention",
                 num("needs_attention_area_mm2"), r.value("needs_attention_rows", 0));
   if (r.contains("round_gains")) {
     std::printf("  %-34s", "gain per round, predicted/realized");
