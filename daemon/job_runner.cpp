@@ -133,6 +133,17 @@ std::vector<std::uint8_t> failure_counts(const std::vector<json>& round_infos, c
   return fails;
 }
 
+/// Planning that a pause, abort or shutdown stops at its next stage boundary (or inside the matrix build):
+/// the request becomes an Interrupted like one between moves; nothing of the plan is journalled.
+template <class Plan>
+sp::ViewPlan plan_or_stop(Plan&& plan, const std::atomic<int>& stop) {
+  try {
+    return plan();
+  } catch (const sp::PlanCancelled& e) {
+    throw Interrupted(static_cast<StopRequest>(stop.load()), std::string("during planning (") + e.what() + ")");
+  }
+}
+
 /// Rows the closed loop gives up on (needs attention): predicted measurable by `retire_after` executed rounds
 /// and still unmeasured, or predicted by a replanning round that measured nothing new at all — that round's
 /// predictions did not hold anywhere, and the loop stops there, so its rows are not chased again either.
@@ -460,8 +471,10 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
     auto plans = round_plans();
     if (plans.empty()) {
       transition(j, JobState::planning);
-      sp::ViewPlan p = sp::plan_views(j.object, models_.sensor, j.spec, j.settings, j.rough_options,
-                                      settings_.planner_threads, &models_.cell);
+      sp::ViewPlan p = plan_or_stop([&] {
+        return sp::plan_views(j.object, models_.sensor, j.spec, j.settings, j.rough_options, settings_.planner_threads,
+                              &models_.cell, nullptr, nullptr, &stop);
+      }, stop);
       j.rough = p.rough;
       j.unmeasurable = p.cover.unmeasurable_rows;
       const std::vector<std::string> poses = view_records(p);
@@ -630,8 +643,10 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
         if (retired[r]) measured[r] = 1;
         else if (fails[r] > 0) weight_scale[r] = settings_.failed_row_weight;
       }
-      sp::ViewPlan p = sp::plan_views(j.object, models_.sensor, j.spec, replan, j.rough_options, settings_.planner_threads,
-                                      &models_.cell, &measured, &weight_scale);
+      sp::ViewPlan p = plan_or_stop([&] {
+        return sp::plan_views(j.object, models_.sensor, j.spec, replan, j.rough_options, settings_.planner_threads,
+                              &models_.cell, &measured, &weight_scale, &stop);
+      }, stop);
       if (p.views.empty()) {
         finish(j, JobState::stalled, "replan adds nothing: " + summary);
         return JobState::stalled;

@@ -22,4 +22,10 @@ struct DataError : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+/// Planning stopped because its caller asked (plan_views' `cancel` flag turned non-zero): the message names
+/// the stage it stopped at. Nothing of the plan is kept.
+struct PlanCancelled : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
 }  // namespace scancell::planner

@@ -1,5 +1,7 @@
 #include "planner/measurability.hpp"
 
+#include "planner/errors.hpp"
+
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -151,7 +153,7 @@ std::vector<std::uint32_t> MeasurabilityMatrix::unmeasurable_rows() const {
 
 MeasurabilityMatrix build_measurability(const RoughModel& rough, const OcclusionScene& scene, const SensorModel& sensor_in,
                                         const ModelSpec& spec_in, const std::vector<Viewpoint>& candidates,
-                                        const MatrixSettings& settings, MatrixStats* stats) {
+                                        const MatrixSettings& settings, MatrixStats* stats, const std::atomic<int>* cancel) {
   MeasurabilityMatrix m;
   m.n_rows = static_cast<std::uint32_t>(rough.size());
   m.columns.resize(candidates.size());
@@ -178,6 +180,7 @@ MeasurabilityMatrix build_measurability(const RoughModel& rough, const Occlusion
     pending_rows.reserve(kPairsPerFlush);
     rays.reserve(per_pair * kPairsPerFlush);
     for (std::size_t j = range.begin(); j != range.end(); ++j) {
+      if (cancel && cancel->load(std::memory_order_relaxed) != 0) return;  // the caller stops planning
       const Viewpoint& v = candidates[j];
       const Eigen::Matrix3d r = v.rotation();
       const Eigen::Matrix3d rt = r.transpose();
@@ -230,6 +233,9 @@ MeasurabilityMatrix build_measurability(const RoughModel& rough, const Occlusion
       cnt.measurable += measured;
     }
   });
+  if (cancel && cancel->load() != 0)
+    throw PlanCancelled("planning stopped by request while building the measurability matrix (" + std::to_string(candidates.size()) +
+                        " candidates)");
   cnt.export_to(stats, static_cast<std::uint64_t>(m.n_rows) * candidates.size());
   return m;
 }

@@ -1,4 +1,5 @@
 #pragma once
+#include <atomic>
 // The measurability matrix M (thesis 3.3): rows are rough-model points, columns candidate viewpoints;
 // m_ij = 1 when point i lies in viewpoint j's frustum, is visible to both laser and receiver, and its
 // predicted precision (eq. 3.4) and sampling density (eq. 3.8) meet the model specification.
@@ -96,7 +97,8 @@ struct MatrixSettings {
 /// the surviving pairs' two occlusion rays are streamed through Embree. Deterministic for any thread count.
 MeasurabilityMatrix build_measurability(const RoughModel& rough, const OcclusionScene& scene, const SensorModel& sensor,
                                         const ModelSpec& spec, const std::vector<Viewpoint>& candidates,
-                                        const MatrixSettings& settings = {}, MatrixStats* stats = nullptr);
+                                        const MatrixSettings& settings = {}, MatrixStats* stats = nullptr,
+                                        const std::atomic<int>* cancel = nullptr);
 
 /// The same element test with no culling at all: every pair is transformed and both rays cast whatever the
 /// analytic tests say. The thesis' O(s²v) reference; for benchmarks and cross-checks only.

@@ -48,7 +48,11 @@ void improve_by_local_search(const MeasurabilityMatrix& m, const std::vector<dou
 ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const ModelSpec& spec,
                     const PlannerSettings& settings_in, const RoughModelOptions& rough_options, int threads,
                     const CellModel* cell_in, const std::vector<std::uint8_t>* measured_rows,
-                    const std::vector<double>* row_weight_scale) {
+                    const std::vector<double>* row_weight_scale, const std::atomic<int>* cancel) {
+  // A non-zero `cancel` stops planning at the next stage boundary, or inside the matrix build (the long stage).
+  auto check = [cancel](const char* stage) {
+    if (cancel && cancel->load() != 0) throw PlanCancelled(std::string("planning stopped by request after ") + stage);
+  };
   validate(sensor);
   validate(spec);
   ViewPlan p;
@@ -78,6 +82,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     auto t = Clock::now();
     p.rough = build_rough_model(std::move(object_mm), rough_options, &p.rough_report);
     p.times.rough_model_s = since(t);
+    check("the rough model");
     if (measured_rows && measured_rows->size() != p.rough.size())
       throw DataError("replan: " + std::to_string(measured_rows->size()) + " measured-row flags for a rough model of " +
                       std::to_string(p.rough.size()) + " rows (not the rough model the views were measured on)");
@@ -196,9 +201,10 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     merge_duplicates(candidates);
     p.candidates = candidates.size();
     p.times.viewpoints_s = since(t);
+    check("viewpoint generation");
 
     t = Clock::now();
-    auto matrix = build_measurability(p.rough, scene, sensor, spec, candidates, settings.matrix, &p.matrix_stats);
+    auto matrix = build_measurability(p.rough, scene, sensor, spec, candidates, settings.matrix, &p.matrix_stats, cancel);
     strip_measured(matrix);
     // Rows nothing measures: add open-direction views for them (deep holes, undercuts) and their columns.
     auto unmeasurable = matrix.unmeasurable_rows();
@@ -218,7 +224,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
       detuned.precision_mm /= 1.1;
       detuned.density_per_mm2 *= 1.1;
       MatrixStats extra_stats;
-      auto more = build_measurability(p.rough, scene, sensor, detuned, extra, settings.matrix, &extra_stats);
+      auto more = build_measurability(p.rough, scene, sensor, detuned, extra, settings.matrix, &extra_stats, cancel);
       strip_measured(more);
       p.generation.open_direction_candidates = extra.size();
       candidates.insert(candidates.end(), extra.begin(), extra.end());
@@ -236,6 +242,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     p.matrix_bytes = matrix.memory_bytes();
     p.times.matrix_s = since(t);
 
+    check("the measurability matrix");
     t = Clock::now();
     // Axis targets of every candidate, for costs and travel (IK seeded at home, so deterministic).
     std::vector<JointVector> q_of;
@@ -248,6 +255,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
         q_of[i] = ik.ok ? ik.q : p.cell->home();
       });
     }
+    check("the axis targets");
     if (p.settings.cover.mode == CoverMode::exact) {
       // With a cell, c_j is the view's expected time: its scan plus half the move from home (a view is entered
       // and left, each roughly half-way across the envelope).

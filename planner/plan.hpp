@@ -1,6 +1,7 @@
 #pragma once
 // One planning pass of the 3M algorithm (thesis table 3.1): rough model -> candidate viewpoints ->
 // measurability matrix -> set cover -> view plan, with per-stage wall times.
+#include <atomic>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -81,7 +82,7 @@ struct ViewPlan {
 ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const ModelSpec& spec,
                     const PlannerSettings& settings, const RoughModelOptions& rough_options, int threads = 0,
                     const CellModel* cell = nullptr, const std::vector<std::uint8_t>* measured_rows = nullptr,
-                    const std::vector<double>* row_weight_scale = nullptr);
+                    const std::vector<double>* row_weight_scale = nullptr, const std::atomic<int>* cancel = nullptr);
 
 /// The documented plan file (docs/plan-format.md).
 nlohmann::json plan_to_json(const ViewPlan& plan);

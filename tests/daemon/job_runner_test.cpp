@@ -278,6 +278,23 @@ TEST_F(SimCell, PauseStopsAtASafePointAndAbortEndsTheJob) {
   EXPECT_TRUE(finished(journal->job(job).state));
 }
 
+// Issue 16: an abort or pause during planning took effect only after the plan (over 2 minutes on a big
+// object). Planning stops at its next stage boundary: a pause given before the first plan leaves the job
+// paused with no plan journalled, and an abort ends it the same way.
+TEST_F(SimCell, PauseAndAbortStopPlanningWithoutWaitingForThePlan) {
+  const auto job = submit(write_cube(dir));
+  std::atomic<int> stop{static_cast<int>(StopRequest::pause)};
+  auto r = runner();
+  EXPECT_EQ(r.run(job, stop), JobState::paused);
+  EXPECT_THAT(journal->job(job).cause, HasSubstr("during planning"));
+  EXPECT_TRUE(journal->plans(job).empty());
+  journal->set_state(job, JobState::queued, "resumed");
+  stop = static_cast<int>(StopRequest::abort);
+  EXPECT_EQ(r.run(job, stop), JobState::aborted);
+  EXPECT_TRUE(journal->plans(job).empty());
+  EXPECT_EQ(stored_views(job), 0u);
+}
+
 TEST_F(SimCell, RegistrationPutsSamplesWhereTheyReallyAreUnderPoseError) {
   // The positioner misses by σ_p 0.5 mm, σ_a 0.5° per move (issue 9's figure). The job is given a coarse
   // mesh of the object (1500 vertices, what a rough scan or an old model would be); the truth is the fine

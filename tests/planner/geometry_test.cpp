@@ -1,6 +1,8 @@
 // Known geometries: what one viewpoint can and cannot measure, and what the whole planner does with them.
+#include <atomic>
 #include <numbers>
 
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include "planner/errors.hpp"
@@ -189,6 +191,17 @@ TEST(Geometry, CulledMatrixEqualsNaiveAllPairs) {
   // Single-pair evaluation agrees with the matrix.
   for (std::size_t j = 0; j < fast.n_cols(); j += 97)
     for (std::uint32_t i = 0; i < rm.size(); i += 7) EXPECT_EQ(measurable(rm, scene, sensor, spec, cands[j], i), fast.columns[j].contains(i));
+  // Issue 16: a cancel request stops the build (the daemon's abort waited minutes for planning); without one
+  // the flag changes nothing.
+  std::atomic<int> cancel{0};
+  EXPECT_EQ(build_measurability(rm, scene, sensor, spec, cands, {}, nullptr, &cancel).nonzeros(), fast.nonzeros());
+  cancel = 2;
+  try {
+    build_measurability(rm, scene, sensor, spec, cands, {}, nullptr, &cancel);
+    ADD_FAILURE() << "the matrix build ignored the cancel request";
+  } catch (const PlanCancelled& e) {
+    EXPECT_THAT(e.what(), ::testing::HasSubstr("while building the measurability matrix"));
+  }
 }
 
 TEST(Geometry, SingleBestViewSeesAWholeSmallSegment) {

@@ -1,4 +1,5 @@
 // Whole-pipeline tests: determinism across runs and thread counts, and the scancell command's contract.
+#include <atomic>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -6,6 +7,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "planner/errors.hpp"
 #include "planner/plan.hpp"
 #include "test_meshes.hpp"
 
@@ -43,6 +45,19 @@ TEST(Plan, IdenticalForIdenticalInputsAndSeedAcrossThreadCounts) {
   EXPECT_GT(a["views"].size(), 5u);
   o.seed = 8;  // another seed, another rough model, another plan
   EXPECT_NE(a.dump(), plan_without_times(plan_views(mushroom_mm(), sensor, spec, {}, o, 2)).dump());
+}
+
+// Issue 16: planning stops at a stage boundary when its caller asks, naming where; nothing is returned.
+TEST(Plan, ACancelRequestStopsPlanningAndNamesTheStage) {
+  RoughModelOptions o;
+  o.target_vertices = 300;
+  std::atomic<int> cancel{1};
+  try {
+    plan_views(mushroom_mm(), testing::thesis_sensor(), testing::thesis_spec(), {}, o, 1, nullptr, nullptr, nullptr, &cancel);
+    ADD_FAILURE() << "planned despite the request";
+  } catch (const PlanCancelled& e) {
+    EXPECT_THAT(e.what(), HasSubstr("planning stopped by request after the rough model"));
+  }
 }
 
 TEST(Plan, MushroomIsCoveredWithAConnectedRegistrationGraph) {
