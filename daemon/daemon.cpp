@@ -89,6 +89,7 @@ Daemon::Daemon(DaemonConfig config) : config_(std::move(config)) {
 }
 
 Daemon::~Daemon() {
+  shutting_down_ = 1;
   running_ = false;
   stop_ = static_cast<int>(StopRequest::shutdown);
   wake_.notify_all();
@@ -274,7 +275,7 @@ json Daemon::handle(const json& req, const std::function<bool(const json&)>& sen
       r.rough_vertices = static_cast<std::size_t>(n);
     }
     try {
-      validate_request(r);
+      validate_request(r, &shutting_down_);
     } catch (const planner::MeshError& e) {
       throw std::invalid_argument(std::string("submit: mesh refused: ") + e.what());
     } catch (const planner::ConfigError& e) {
@@ -439,6 +440,7 @@ int Daemon::run() {
   }
   std::cerr << "scancelld: stopping at the next safe point" << std::endl;
   notifier_.stopping("stopping: finishing the current move or profile, then parking");
+  shutting_down_ = 1;
   running_ = false;
   stop_ = static_cast<int>(StopRequest::shutdown);
   wake_.notify_all();

@@ -54,7 +54,8 @@ class Daemon {
   std::atomic<bool> running_{true};
   std::atomic<int> stop_{0};              // StopRequest for the job that is running
   std::atomic<std::int64_t> current_{0};  // the running job, 0 when idle
-  std::mutex claim_mu_;                   // the job loop claiming a job vs. pause/abort requests
+  std::mutex claim_mu_;
+  std::atomic<int> shutting_down_{0};     // set first when stopping: a submit's mesh read stops at once                   // the job loop claiming a job vs. pause/abort requests
   std::mutex wake_mu_;
   std::condition_variable wake_;
 

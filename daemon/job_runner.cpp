@@ -195,8 +195,8 @@ std::vector<std::string> view_records(const sp::ViewPlan& p) {
   return out;
 }
 
-sp::TriangleMesh load_object(const std::string& path, double fit_mm) {
-  sp::TriangleMesh m = sp::load_mesh(path);
+sp::TriangleMesh load_object(const std::string& path, double fit_mm, const std::atomic<int>* cancel = nullptr) {
+  sp::TriangleMesh m = sp::load_mesh(path, nullptr, std::chrono::milliseconds(30000), cancel);
   if (fit_mm > 0.0) sp::apply_scale(m, sp::fit_scale(m, fit_mm));
   return m;
 }
@@ -236,7 +236,7 @@ JobRequest JobRequest::from_json(const json& j) {
   return r;
 }
 
-void validate_request(const JobRequest& r) {
+void validate_request(const JobRequest& r, const std::atomic<int>* cancel) {
   if (!r.mesh.empty() && r.bbox_mm)
     throw std::invalid_argument("submit: 'mesh' and 'bbox_mm' both given; give a rough model or a bounding box to rough-scan, not both");
   if (r.mesh.empty() && !r.bbox_mm) throw std::invalid_argument("submit: give 'mesh' (a rough model) or 'bbox_mm' (start with a rough scan)");
@@ -244,15 +244,15 @@ void validate_request(const JobRequest& r) {
     throw std::invalid_argument("submit: 'bbox_mm' sizes must be in (0, 1000) mm");
   if (!(r.fit_mm >= 0.0) || !std::isfinite(r.fit_mm)) throw std::invalid_argument("submit: 'fit_mm' must be > 0");
   if (r.bbox_mm) {
-    if (!r.truth.empty()) load_object(r.truth, r.fit_mm);
+    if (!r.truth.empty()) load_object(r.truth, r.fit_mm, cancel);
     if (!r.spec.empty()) sp::load_spec(r.spec);
     if (!r.settings.empty()) sp::load_planner_settings(r.settings);
     return;
   }
   if (r.rough_vertices && (*r.rough_vertices < 50 || *r.rough_vertices > 200000))
     throw std::invalid_argument("submit: 'rough_vertices' must be in [50, 200000]");
-  load_object(r.mesh, r.fit_mm);
-  if (!r.truth.empty()) load_object(r.truth, r.fit_mm);
+  load_object(r.mesh, r.fit_mm, cancel);
+  if (!r.truth.empty()) load_object(r.truth, r.fit_mm, cancel);
   if (!r.spec.empty()) sp::load_spec(r.spec);
   if (!r.settings.empty()) sp::load_planner_settings(r.settings);
 }

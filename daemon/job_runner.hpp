@@ -120,8 +120,9 @@ struct JobRequest {
   static JobRequest from_json(const nlohmann::json& j);
 };
 
-/// Loads and checks everything a request names; throws planner::MeshError/ConfigError naming the file.
-void validate_request(const JobRequest& r);
+/// Loads and checks everything a request names; throws planner::MeshError/ConfigError naming the file. A
+/// non-zero `cancel` stops a mesh read at once (MeshError): the daemon stopping does not wait for it.
+void validate_request(const JobRequest& r, const std::atomic<int>* cancel = nullptr);
 
 struct Progress {
   std::int64_t job = 0;

@@ -1,4 +1,5 @@
 #pragma once
+#include <atomic>
 // Indexed triangle meshes: loading (assimp) with strict validation, scaling, welding.
 #include <array>
 #include <cstdint>
@@ -31,8 +32,11 @@ struct MeshLoadReport {
 /// triangles. Degenerate triangles are dropped and counted in the report. The file is parsed in a child
 /// process that is stopped after `time_limit` (a malformed file can make a parser loop or crash; the caller
 /// gets a MeshError naming the file either way).
+/// A non-zero `cancel` stops the reader at once (MeshError "reading stopped"): a daemon that is stopping does
+/// not wait out a slow or hanging file.
 TriangleMesh load_mesh(const std::filesystem::path& path, MeshLoadReport* report = nullptr,
-                       std::chrono::milliseconds time_limit = std::chrono::milliseconds(30000));
+                       std::chrono::milliseconds time_limit = std::chrono::milliseconds(30000),
+                       const std::atomic<int>* cancel = nullptr);
 
 /// Validates an in-memory mesh with the same rules (name is used in messages); drops degenerate triangles.
 void validate_mesh(TriangleMesh& mesh, const std::string& name, MeshLoadReport* report = nullptr);

@@ -191,7 +191,8 @@ std::string import_to_bytes(const std::string& name) {
 
 }  // namespace
 
-TriangleMesh load_mesh(const std::filesystem::path& path, MeshLoadReport* report, std::chrono::milliseconds time_limit) {
+TriangleMesh load_mesh(const std::filesystem::path& path, MeshLoadReport* report, std::chrono::milliseconds time_limit,
+                       const std::atomic<int>* cancel) {
   const std::string name = path.string();
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec))
@@ -227,7 +228,7 @@ TriangleMesh load_mesh(const std::filesystem::path& path, MeshLoadReport* report
   ::close(fds[1]);
   std::string bytes;
   const auto deadline = std::chrono::steady_clock::now() + time_limit;
-  bool timed_out = false;
+  bool timed_out = false, cancelled = false;
   char buf[65536];
   while (true) {
     const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
@@ -235,8 +236,12 @@ TriangleMesh load_mesh(const std::filesystem::path& path, MeshLoadReport* report
       timed_out = true;
       break;
     }
+    if (cancel && cancel->load() != 0) {
+      cancelled = true;
+      break;
+    }
     pollfd p{fds[0], POLLIN, 0};
-    const int r = ::poll(&p, 1, static_cast<int>(std::min<long long>(left.count(), 1000)));
+    const int r = ::poll(&p, 1, static_cast<int>(std::min<long long>(left.count(), cancel ? 50 : 1000)));
     if (r < 0 && errno == EINTR) continue;
     if (r <= 0) continue;
     const ssize_t n = ::read(fds[0], buf, sizeof buf);
@@ -245,10 +250,11 @@ TriangleMesh load_mesh(const std::filesystem::path& path, MeshLoadReport* report
     bytes.append(buf, static_cast<std::size_t>(n));
   }
   ::close(fds[0]);
-  if (timed_out) ::kill(pid, SIGKILL);
+  if (timed_out || cancelled) ::kill(pid, SIGKILL);
   int status = 0;
   while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
   }
+  if (cancelled) throw MeshError(name + ": reading stopped by request (the daemon is stopping)");
   if (timed_out)
     throw MeshError(name + ": the mesh reader did not finish within " + std::to_string(time_limit.count() / 1000.0).substr(0, 5) +
                     " s and was stopped; the file is malformed (a PLY header without 'end_header'?) or too large");

@@ -112,8 +112,19 @@ out=$("$BUILD/tools/scancell" plan --mesh "$SRC/tests/data/cube50.off" --sensor 
 # 6. SIGHUP reloads; SIGTERM stops at a safe point and exits 0.
 kill -HUP "$DAEMON_PID"; sleep 0.3
 grep -q "SIGHUP reload" "$W/daemon.log" || fail "SIGHUP not handled"
-kill -TERM "$DAEMON_PID"; wait "$DAEMON_PID"; rc=$?; DAEMON_PID=""
+# A submit whose mesh hangs the reader (a PLY without end_header: 30 s until the reader's limit) is under way
+# when SIGTERM comes: the daemon stops it and exits promptly (issue 16: it waited out the read).
+"$BUILD/tools/scancellctl" --socket "$W/control.sock" submit --mesh "$SRC/tests/data/bad/ply-header-typo-hang.ply" > "$W/hang.log" 2>&1 &
+HANG_PID=$!
+sleep 0.5
+t0=$(date +%s.%N)
+kill -TERM "$DAEMON_PID"
+for _ in $(seq 200); do kill -0 "$DAEMON_PID" 2>/dev/null || break; sleep 0.05; done
+kill -0 "$DAEMON_PID" 2>/dev/null && fail "SIGTERM: still running 10 s later with a submit reading a hanging mesh"
+wait "$DAEMON_PID"; rc=$?; DAEMON_PID=""
+wait "$HANG_PID" 2>/dev/null
 [ $rc = 0 ] || fail "SIGTERM exit $rc"
+awk -v a="$t0" -v b="$(date +%s.%N)" 'BEGIN { printf "daemon_cli: stopped %.1f s after SIGTERM with a hanging mesh read under way\n", b - a }'
 grep -q "scancelld: stopped" "$W/daemon.log" || fail "no clean stop"
 # 7. A restarted daemon loads the calibration its run wrote.
 "$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" > "$W/daemon2.log" 2>&1 &
