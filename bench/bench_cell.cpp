@@ -30,12 +30,12 @@
 #include <tbb/info.h>
 #include <tbb/task_arena.h>
 
-#include "planner/cell.hpp"
+#include "planner/kinematics/cell.hpp"
 #include "planner/config.hpp"
-#include "planner/cover.hpp"
-#include "planner/measurability.hpp"
+#include "planner/core/cover.hpp"
+#include "planner/core/measurability.hpp"
 #include "planner/plan.hpp"
-#include "planner/synthetic.hpp"
+#include "planner/sim/synthetic.hpp"
 
 namespace sp = scancell::planner;
 namespace fs = std::filesystem;

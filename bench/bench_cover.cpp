@@ -15,10 +15,10 @@
 #include <string>
 
 #include "planner/config.hpp"
-#include "planner/exact_cover.hpp"
-#include "planner/local_cover.hpp"
+#include "planner/core/exact_cover.hpp"
+#include "planner/core/local_cover.hpp"
 #include "planner/plan.hpp"
-#include "planner/synthetic.hpp"
+#include "planner/sim/synthetic.hpp"
 
 namespace sp = scancell::planner;
 using Clock = std::chrono::steady_clock;

@@ -17,9 +17,9 @@
 #include <tbb/task_arena.h>
 
 #include "planner/plan.hpp"
-#include "planner/pose_error.hpp"
-#include "planner/synthetic.hpp"
-#include "planner/verify.hpp"
+#include "planner/kinematics/pose_error.hpp"
+#include "planner/sim/synthetic.hpp"
+#include "planner/sim/verify.hpp"
 
 namespace sp = scancell::planner;
 

@@ -25,12 +25,12 @@
 #include <tbb/info.h>
 #include <tbb/task_arena.h>
 
-#include "planner/baselines.hpp"
+#include "planner/sim/baselines.hpp"
 #include "planner/config.hpp"
-#include "planner/exact_cover.hpp"
+#include "planner/core/exact_cover.hpp"
 #include "planner/plan.hpp"
-#include "planner/synthetic.hpp"
-#include "planner/verify.hpp"
+#include "planner/sim/synthetic.hpp"
+#include "planner/sim/verify.hpp"
 
 namespace sp = scancell::planner;
 namespace fs = std::filesystem;

@@ -19,8 +19,8 @@
 #include <nlohmann/json.hpp>
 
 #include "calibration/runs.hpp"
-#include "planner/cell.hpp"
-#include "planner/sensor.hpp"
+#include "planner/kinematics/cell.hpp"
+#include "planner/core/sensor.hpp"
 
 namespace scancell::calibration {
 

@@ -57,7 +57,7 @@ std::vector<Eigen::Vector3d> view_points_where(const sp::RangeImage& img, Keep k
 
 double tan_x(const sp::SensorModel& s, int i) { return std::tan(-0.5 * s.fov_x_rad + s.fov_x_rad * i / (s.samples_x - 1)); }
 
-/// Incidence angles of the virtual scanner (planner/virtual_scanner.cpp) for a plane normal `n` in the view
+/// Incidence angles of the virtual scanner (planner/sim/virtual_scanner.cpp) for a plane normal `n` in the view
 /// frame (facing the camera) and laser ray i: θ_xz against the ray back to the laser, θ_yz in the laser plane.
 double theta_xz(const Eigen::Vector3d& n, double tx) {
   const Eigen::Vector2d a(n.x(), n.z()), b(-tx, 1.0);

@@ -10,9 +10,9 @@
 #include <vector>
 
 #include "calibration/targets.hpp"
-#include "planner/cell.hpp"
-#include "planner/sensor.hpp"
-#include "planner/virtual_scanner.hpp"
+#include "planner/kinematics/cell.hpp"
+#include "planner/core/sensor.hpp"
+#include "planner/sim/virtual_scanner.hpp"
 
 namespace scancell::calibration {
 

@@ -7,7 +7,7 @@
 
 #include <Eigen/Core>
 
-#include "planner/mesh.hpp"
+#include "planner/geometry/mesh.hpp"
 
 namespace scancell::calibration {
 

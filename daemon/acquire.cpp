@@ -5,7 +5,7 @@
 #include <map>
 #include <thread>
 
-#include "planner/cell.hpp"
+#include "planner/kinematics/cell.hpp"
 #include "planner/errors.hpp"
 
 namespace scancell::daemon {

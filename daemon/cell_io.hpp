@@ -10,7 +10,7 @@
 #include "drivers/config.hpp"
 #include "drivers/gpio.hpp"
 #include "drivers/sim/modbus_sim.hpp"
-#include "planner/cell.hpp"
+#include "planner/kinematics/cell.hpp"
 
 namespace scancell::daemon {
 

@@ -10,11 +10,11 @@
 #include <thread>
 
 #include "planner/errors.hpp"
-#include "planner/mesh.hpp"
-#include "planner/pose_error.hpp"
-#include "planner/surface_distance.hpp"
-#include "planner/verify.hpp"
-#include "planner/virtual_scanner.hpp"
+#include "planner/geometry/mesh.hpp"
+#include "planner/kinematics/pose_error.hpp"
+#include "planner/geometry/surface_distance.hpp"
+#include "planner/sim/verify.hpp"
+#include "planner/sim/virtual_scanner.hpp"
 
 namespace scancell::daemon {
 namespace {

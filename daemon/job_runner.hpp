@@ -23,12 +23,12 @@
 #include "drivers/axis.hpp"
 #include "drivers/gpio.hpp"
 #include "drivers/scanner.hpp"
-#include "planner/cell.hpp"
+#include "planner/kinematics/cell.hpp"
 #include "planner/config.hpp"
-#include "planner/measured_coverage.hpp"
+#include "planner/reconstruction/measured_coverage.hpp"
 #include "planner/plan.hpp"
-#include "planner/registration.hpp"
-#include "planner/rough_scan.hpp"
+#include "planner/reconstruction/registration.hpp"
+#include "planner/reconstruction/rough_scan.hpp"
 
 namespace scancell::daemon {
 

@@ -15,9 +15,9 @@
 #include <Eigen/Geometry>
 
 #include "drivers/gpio.hpp"
-#include "planner/mesh.hpp"
-#include "planner/scene.hpp"
-#include "planner/virtual_scanner.hpp"
+#include "planner/geometry/mesh.hpp"
+#include "planner/geometry/scene.hpp"
+#include "planner/sim/virtual_scanner.hpp"
 
 namespace scancell::drivers {
 

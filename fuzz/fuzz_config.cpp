@@ -3,7 +3,7 @@
 #include "calibration/results.hpp"
 #include "drivers/config.hpp"
 #include "fuzz/fuzz.hpp"
-#include "planner/cell.hpp"
+#include "planner/kinematics/cell.hpp"
 #include "planner/config.hpp"
 #include "planner/errors.hpp"
 

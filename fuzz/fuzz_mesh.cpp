@@ -5,7 +5,7 @@
 
 #include "fuzz/fuzz.hpp"
 #include "planner/errors.hpp"
-#include "planner/mesh.hpp"
+#include "planner/geometry/mesh.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size < 1) return 0;

@@ -3,7 +3,7 @@
 
 #include "fuzz/fuzz.hpp"
 #include "planner/errors.hpp"
-#include "planner/virtual_scanner.hpp"
+#include "planner/sim/virtual_scanner.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   try {

@@ -8,7 +8,7 @@
 
 #include "planner/yaml_section.hpp"
 
-#include "planner/cell.hpp"
+#include "planner/kinematics/cell.hpp"
 #include "planner/errors.hpp"
 
 namespace scancell::planner {

@@ -5,9 +5,9 @@
 #include <filesystem>
 #include <string>
 
-#include "planner/cover.hpp"
-#include "planner/sensor.hpp"
-#include "planner/viewpoint.hpp"
+#include "planner/core/cover.hpp"
+#include "planner/core/sensor.hpp"
+#include "planner/core/viewpoint.hpp"
 
 namespace scancell::planner {
 

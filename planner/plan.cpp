@@ -1,6 +1,6 @@
 #include "planner/plan.hpp"
 
-#include "planner/cell_viewpoints.hpp"
+#include "planner/core/cell_viewpoints.hpp"
 #include "planner/errors.hpp"
 
 #include <algorithm>

@@ -10,16 +10,16 @@
 
 #include <optional>
 
-#include "planner/cell.hpp"
-#include "planner/cell_viewpoints.hpp"
+#include "planner/kinematics/cell.hpp"
+#include "planner/core/cell_viewpoints.hpp"
 #include "planner/config.hpp"
-#include "planner/cover.hpp"
-#include "planner/exact_cover.hpp"
-#include "planner/local_cover.hpp"
-#include "planner/measurability.hpp"
-#include "planner/mesh.hpp"
-#include "planner/rough_model.hpp"
-#include "planner/viewpoint.hpp"
+#include "planner/core/cover.hpp"
+#include "planner/core/exact_cover.hpp"
+#include "planner/core/local_cover.hpp"
+#include "planner/core/measurability.hpp"
+#include "planner/geometry/mesh.hpp"
+#include "planner/core/rough_model.hpp"
+#include "planner/core/viewpoint.hpp"
 
 namespace scancell::planner {
 

@@ -7,7 +7,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "planner/cell.hpp"
+#include "planner/kinematics/cell.hpp"
 #include "planner/config.hpp"
 #include "planner/errors.hpp"
 

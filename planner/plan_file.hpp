@@ -7,10 +7,10 @@
 
 #include <Eigen/Core>
 
-#include "planner/mesh.hpp"
-#include "planner/sensor.hpp"
-#include "planner/viewpoint.hpp"
-#include "planner/virtual_scanner.hpp"
+#include "planner/geometry/mesh.hpp"
+#include "planner/core/sensor.hpp"
+#include "planner/core/viewpoint.hpp"
+#include "planner/sim/virtual_scanner.hpp"
 
 namespace scancell::planner {
 

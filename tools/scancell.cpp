@@ -18,7 +18,7 @@
 #include "planner/errors.hpp"
 #include "planner/plan.hpp"
 #include "planner/plan_file.hpp"
-#include "planner/verify.hpp"
+#include "planner/sim/verify.hpp"
 
 namespace sp = scancell::planner;
 

@@ -119,8 +119,8 @@ HANG_PID=$!
 sleep 0.5
 t0=$(date +%s.%N)
 kill -TERM "$DAEMON_PID"
-for _ in $(seq 200); do kill -0 "$DAEMON_PID" 2>/dev/null || break; sleep 0.05; done
-kill -0 "$DAEMON_PID" 2>/dev/null && fail "SIGTERM: still running 10 s later with a submit reading a hanging mesh"
+for _ in $(seq 400); do kill -0 "$DAEMON_PID" 2>/dev/null || break; sleep 0.05; done
+kill -0 "$DAEMON_PID" 2>/dev/null && fail "SIGTERM: still running 20 s later with a submit reading a hanging mesh (the read alone lasts 30 s)"
 wait "$DAEMON_PID"; rc=$?; DAEMON_PID=""
 wait "$HANG_PID" 2>/dev/null
 [ $rc = 0 ] || fail "SIGTERM exit $rc"

@@ -15,10 +15,10 @@
 #include "daemon/job_runner.hpp"
 #include "planner/config.hpp"
 #include "planner/errors.hpp"
-#include "planner/mesh.hpp"
-#include "planner/rough_model.hpp"
-#include "planner/rough_scan.hpp"
-#include "planner/virtual_scanner.hpp"
+#include "planner/geometry/mesh.hpp"
+#include "planner/core/rough_model.hpp"
+#include "planner/reconstruction/rough_scan.hpp"
+#include "planner/sim/virtual_scanner.hpp"
 
 namespace scancell::daemon {
 namespace {

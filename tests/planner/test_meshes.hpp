@@ -3,7 +3,7 @@
 #include <string>
 
 #include "planner/config.hpp"
-#include "planner/mesh.hpp"
+#include "planner/geometry/mesh.hpp"
 
 namespace scancell::planner::testing {
 

@@ -1,0 +1,139 @@
+#include "planner/core/cell_viewpoints.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+#include <tbb/parallel_for.h>
+
+namespace scancell::planner {
+namespace {
+
+/// The steepest elevation the tilt axis allows (tilt 0 looks horizontally; tilt φ looks down by φ).
+double max_elevation(const CellModel& cell) {
+  const Axis& tilt = cell.axes[cell.axis_index("tilt")];
+  return std::min(std::abs(tilt.min), std::abs(tilt.max));
+}
+
+/// The camera frame (object coordinates) looking along `b` with the cell's one twist: camera y = −(Z × b)
+/// normalised in the table frame, so that the table can turn it onto world +Y with the camera on the
+/// scanner's side; x = y × z.
+Eigen::Matrix3d cell_frame(const Eigen::Vector3d& b_table, const Eigen::Matrix3d& table_to_object) {
+  const Eigen::Vector3d y = -Eigen::Vector3d::UnitZ().cross(b_table).normalized();
+  const Eigen::Vector3d z = -b_table;
+  Eigen::Matrix3d r;
+  r.col(0) = y.cross(z);
+  r.col(1) = y;
+  r.col(2) = z;
+  return table_to_object * r;
+}
+
+/// `b` (table frame) with its elevation set to `elev` and its azimuth turned by `yaw` about the table axis.
+Eigen::Vector3d aim(const Eigen::Vector3d& b, double elev, double yaw) {
+  Eigen::Vector2d h = b.head<2>();
+  if (h.norm() < 1e-9) h = Eigen::Vector2d(-1.0, 0.0);  // straight down or up: any azimuth, take one
+  h.normalize();
+  const double c = std::cos(yaw), s = std::sin(yaw);
+  const Eigen::Vector2d hr(c * h.x() - s * h.y(), s * h.x() + c * h.y());
+  return Eigen::Vector3d(hr.x() * std::cos(elev), hr.y() * std::cos(elev), std::sin(elev));
+}
+
+}  // namespace
+
+bool has_cell_native_viewpoints(const CellModel& cell) { return cell.kinematics == CellKinematics::turntable_lift_tilt; }
+
+std::vector<Viewpoint> cell_viewpoints(const RoughModel& rough, const std::vector<Viewpoint>& seeds,
+                                       const SensorModel& sensor, const ModelSpec& spec,
+                                       const ViewpointSettings& st, const CellModel& cell,
+                                       const CollisionChecker& checker, CellGenerationReport* report) {
+  CellGenerationReport rep;
+  // One seed per optimal-zone position: the untilted, first-twist free candidate of each target row.
+  std::vector<const Viewpoint*> positions;
+  {
+    std::map<std::int32_t, const Viewpoint*> by_row;
+    for (const auto& v : seeds)
+      if (v.target_row >= 0 && v.tilt_rad == 0.0) by_row.emplace(v.target_row, &v);
+    for (const auto& [row, v] : by_row) positions.push_back(v);
+  }
+  rep.seeds = positions.size();
+  const Eigen::Matrix3d object_to_table = cell.object_on_table.linear();
+  const Eigen::Matrix3d table_to_object = object_to_table.transpose();
+  const double elev_max = max_elevation(cell);
+  const double range_cap = std::min(sensor.range_max_mm, max_range_for_precision_mm(sensor, spec));
+
+  struct Out {
+    std::vector<Viewpoint> views;
+    std::size_t clamped = 0, stepped_back = 0, unreachable = 0, colliding = 0;
+  };
+  std::vector<Out> per(positions.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, positions.size(), 8), [&](const auto& range) {
+    for (std::size_t k = range.begin(); k != range.end(); ++k) {
+      const Viewpoint& seed = *positions[k];
+      const auto row = static_cast<std::uint32_t>(seed.target_row);
+      const Eigen::Vector3d target = rough.points[row];
+      Eigen::Vector3d b0 = object_to_table * (-rough.normals[row]);
+      const double elev0 = std::asin(std::clamp(b0.z(), -1.0, 1.0));
+      Out& o = per[k];
+      const double elev_c = std::clamp(elev0, -elev_max, elev_max);
+      if (elev_c != elev0) {
+        ++o.clamped;
+        // A face steeper than the tilt allows says little about the azimuth to view it from; look inwards
+        // from the rim side, where the radial axis has the most room (it cannot reach over the table's centre).
+        const Eigen::Vector3d p_table = cell.object_on_table * target;
+        if (p_table.head<2>().norm() > 1e-6) b0.head<2>() = -p_table.head<2>().normalized() * b0.head<2>().norm();
+      }
+      // The oblique pair: the elevation raised and lowered, both inside the tilt range (one side twice as far
+      // when the other would leave it).
+      double up = elev_c + st.cell_oblique_rad, down = elev_c - st.cell_oblique_rad;
+      if (up > elev_max) up = elev_c - 2.0 * st.cell_oblique_rad;
+      if (down < -elev_max) down = elev_c + 2.0 * st.cell_oblique_rad;
+      // (elevation, yaw sign): the thesis' view, the bisector pair, the two oblique views.
+      const std::pair<double, int> variants[] = {{elev_c, 0}, {elev_c, 1}, {elev_c, -1}, {up, 0}, {down, 0}};
+      int variant = 0;
+      for (const auto& [elev_raw, yaw_sign] : variants) {
+        const double elev = std::clamp(elev_raw, -elev_max, elev_max);
+        bool kept = false, reachable = false;
+        for (int step = 0; step < std::max(1, st.cell_standoff_steps) && !kept; ++step) {
+          const double standoff =
+              st.cell_standoff_steps <= 1 ? seed.standoff_mm
+                                     : seed.standoff_mm + (range_cap - seed.standoff_mm) * step / (st.cell_standoff_steps - 1);
+          if (step > 0 && standoff <= seed.standoff_mm) break;
+          // The bisector's yaw is half the triangulation angle at this stand-off.
+          const double yaw = yaw_sign * 0.5 * std::atan2(sensor.baseline_mm, standoff);
+          const Eigen::Matrix3d r = cell_frame(aim(b0, elev, yaw), table_to_object);
+          const Eigen::Vector3d b = -r.col(2);
+          const double scan = design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad);
+          Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+          pose.linear() = r;
+          pose.translation() = target - standoff * b;
+          if (!inverse_kinematics(cell, pose, scan).ok) continue;
+          reachable = true;
+          if (checker.collides(pose, scan)) continue;
+          Viewpoint v = viewpoint_from_pose(r, pose.translation(), scan);
+          v.standoff_mm = standoff;
+          v.target_row = seed.target_row;
+          v.twist_level = variant;
+          v.tilt_rad = yaw;
+          o.views.push_back(v);
+          o.stepped_back += step > 0;
+          kept = true;
+        }
+        if (!kept) ++(reachable ? o.colliding : o.unreachable);
+        ++variant;
+      }
+    }
+  });
+  std::vector<Viewpoint> out;
+  for (auto& o : per) {
+    rep.clamped += o.clamped;
+    rep.stepped_back += o.stepped_back;
+    rep.unreachable += o.unreachable;
+    rep.colliding += o.colliding;
+    out.insert(out.end(), o.views.begin(), o.views.end());
+  }
+  rep.candidates = out.size();
+  if (report) *report = rep;
+  return out;
+}
+
+}  // namespace scancell::planner

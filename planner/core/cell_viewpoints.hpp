@@ -1,0 +1,51 @@
+#pragma once
+// Candidate viewpoints in the cell's own configuration space (issue 15; thesis 6.3.2 projects free 6-DoF
+// candidates onto the reachable set instead).
+//
+// turntable_lift_tilt imposes the twist: the baseline (camera y) always lies along world +Y, so for a given
+// boresight the only freedom left is the table angle, which turns the boresight's horizontal part towards
+// the scanner. Projecting a free candidate keeps its position and boresight and turns it about the
+// boresight; a boresight steeper than the tilt range is then simply unreachable, and a view whose body hits
+// the object is dropped. Here every optimal-zone position (thesis ch. 6: target row, stand-off
+// (R_o + R_a)·f_d) is instead expanded within the cell's space:
+// - the thesis' view: boresight along the targeted normal, its elevation clamped to the tilt range (the
+//   steepest view the cell has of a top face, not none);
+// - the bisector pair: turned about the table axis by ± half the triangulation angle atan(b/R)/2, so that
+//   the normal bisects the laser and receiver rays (the receiver sits beside the laser, horizontally, in
+//   this cell; a yaw is the cell's own way to straddle the normal);
+// - two oblique views, the elevation raised and lowered by `oblique_rad`: surfaces that face the plate or
+//   sit in clefts are open only from a slant;
+// - each with the one twist the cell reaches (the other sign when the first is out of reach), and, when
+//   the scanner body would hit the object or the plate, stepped back along the boresight (the stand-off
+//   grows towards the precision-limited range) rather than dropped.
+#include <cstdint>
+#include <vector>
+
+#include "planner/kinematics/cell.hpp"
+#include "planner/core/rough_model.hpp"
+#include "planner/core/sensor.hpp"
+#include "planner/core/viewpoint.hpp"
+
+namespace scancell::planner {
+
+struct CellGenerationReport {
+  std::size_t seeds = 0;         // optimal-zone positions expanded
+  std::size_t candidates = 0;    // kept
+  std::size_t clamped = 0;       // boresight steeper than the tilt range, clamped
+  std::size_t stepped_back = 0;  // kept at a longer stand-off to clear the object or the plate
+  std::size_t unreachable = 0;   // no twist sign the axes reach
+  std::size_t colliding = 0;     // collides at every stand-off tried
+};
+
+/// Whether `cell` gets cell-native candidates (turntable_lift_tilt); other kinematics project free ones.
+bool has_cell_native_viewpoints(const CellModel& cell);
+
+/// Cell-native candidates from the optimal-zone positions of `seeds` (free-space candidates: one per target
+/// row is used, its stand-off and target); settings.cell_oblique_rad and cell_standoff_steps shape the
+/// expansion. Deterministic; parallel over seeds.
+std::vector<Viewpoint> cell_viewpoints(const RoughModel& rough, const std::vector<Viewpoint>& seeds,
+                                       const SensorModel& sensor, const ModelSpec& spec,
+                                       const ViewpointSettings& settings, const CellModel& cell,
+                                       const CollisionChecker& checker, CellGenerationReport* report = nullptr);
+
+}  // namespace scancell::planner

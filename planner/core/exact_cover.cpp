@@ -1,0 +1,682 @@
+#include "planner/core/exact_cover.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <cstring>
+#include <map>
+#include <numeric>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <unordered_map>
+
+#include <poll.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <coin/CbcConfig.h>
+#include <coin/CbcEventHandler.hpp>
+#include <coin/CbcModel.hpp>
+#include <coin/CoinPackedMatrix.hpp>
+#include <coin/OsiClpSolverInterface.hpp>
+
+#include "planner/errors.hpp"
+
+namespace scancell::planner {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+/// The instance after presolve, everything the worker needs (it inherits this memory across fork).
+struct Problem {
+  const MeasurabilityMatrix* m = nullptr;
+  const std::vector<double>* w = nullptr;
+  const CoverSettings* st = nullptr;
+  std::vector<double> cost;                       // per original column
+  std::vector<std::vector<std::uint32_t>> cols_of;  // original row -> columns (all rows)
+  std::vector<std::uint32_t> ilp_col;             // ILP column -> original column
+  std::vector<std::int64_t> ilp_of;               // original column -> ILP column or -1
+  std::vector<std::vector<int>> rows;             // ILP rows: ILP columns, Σ x ≥ 1
+  std::vector<std::uint32_t> forced;              // original columns fixed to 1
+  std::vector<double> warm;                       // ILP warm start (empty: none)
+  bool registration = false;
+  bool core = false;  // the ILP holds only a core of the columns
+  double forced_cost = 0.0;
+  mutable std::unordered_map<std::uint32_t, std::vector<std::uint32_t>> neighbours_cache;
+
+  double column_weight(std::uint32_t j) const {
+    double s = 0.0;
+    m->columns[j].for_each([&](std::uint32_t r) { s += (*w)[r]; });
+    return s;
+  }
+  /// Columns k with σ(j, k) ≥ t_r, from the row -> columns index (shared weight accumulated per column).
+  const std::vector<std::uint32_t>& neighbours(std::uint32_t j) const {
+    auto it = neighbours_cache.find(j);
+    if (it != neighbours_cache.end()) return it->second;
+    std::unordered_map<std::uint32_t, double> shared;
+    m->columns[j].for_each([&](std::uint32_t r) {
+      for (auto k : cols_of[r])
+        if (k != j) shared[k] += (*w)[r];
+    });
+    const double wj = column_weight(j);
+    double ms = 0.0;
+    if (st->normalizer == RegistrationNormalizer::max_view)
+      for (std::uint32_t k = 0; k < m->n_cols(); ++k) ms = std::max(ms, column_weight(k));
+    std::vector<std::uint32_t> out;
+    for (const auto& [k, sh] : shared) {
+      const double norm = st->normalizer == RegistrationNormalizer::max_view ? ms : std::min(wj, column_weight(k));
+      if (norm > 0.0 && sh > 0.0 && sh / norm >= st->registration_threshold) out.push_back(k);
+    }
+    std::sort(out.begin(), out.end());
+    return neighbours_cache.emplace(j, std::move(out)).first->second;
+  }
+  /// Components of the registration graph over a set of original columns.
+  std::vector<std::vector<std::uint32_t>> components(const std::vector<std::uint32_t>& set) const {
+    std::map<std::uint32_t, std::size_t> index;
+    for (std::size_t i = 0; i < set.size(); ++i) index[set[i]] = i;
+    std::vector<std::int64_t> comp(set.size(), -1);
+    std::vector<std::vector<std::uint32_t>> out;
+    for (std::size_t s = 0; s < set.size(); ++s) {
+      if (comp[s] >= 0) continue;
+      out.emplace_back();
+      std::vector<std::size_t> stack = {s};
+      comp[s] = static_cast<std::int64_t>(out.size() - 1);
+      while (!stack.empty()) {
+        const std::size_t a = stack.back();
+        stack.pop_back();
+        out.back().push_back(set[a]);
+        for (auto k : neighbours(set[a])) {
+          auto f = index.find(k);
+          if (f != index.end() && comp[f->second] < 0) {
+            comp[f->second] = comp[s];
+            stack.push_back(f->second);
+          }
+        }
+      }
+    }
+    return out;
+  }
+  std::vector<std::uint32_t> cover_of(const double* x, int n) const {
+    std::vector<std::uint32_t> s = forced;
+    for (int j = 0; j < n; ++j)
+      if (x[j] > 0.5) s.push_back(ilp_col[j]);
+    std::sort(s.begin(), s.end());
+    return s;
+  }
+  bool covers_all(const double* x) const {
+    for (const auto& r : rows) {
+      bool ok = false;
+      for (int j : r) ok |= x[j] > 0.5;
+      if (!ok) return false;
+    }
+    return true;
+  }
+  double objective(const std::vector<std::uint32_t>& s) const {
+    double c = 0.0;
+    for (auto j : s) c += cost[j];
+    return c;
+  }
+};
+
+// ---- worker side (runs in the forked child; only CBC, plain memory and write(2)) ----
+
+void send(int fd, const std::string& line) {
+  const char* p = line.data();
+  std::size_t left = line.size();
+  while (left) {
+    const ssize_t n = ::write(fd, p, left);
+    if (n <= 0) {
+      if (n < 0 && errno == EINTR) continue;
+      ::_exit(3);  // parent gone
+    }
+    p += n;
+    left -= static_cast<std::size_t>(n);
+  }
+}
+
+std::string solution_line(const Problem& P, const std::vector<std::uint32_t>& s) {
+  std::ostringstream os;
+  os.precision(17);
+  os << "S " << P.objective(s);
+  for (auto j : s) os << ' ' << j;
+  os << '\n';
+  return os.str();
+}
+
+/// Streams every feasible (and, with the registration constraint, connected) incumbent and the bound.
+class Streamer : public CbcEventHandler {
+ public:
+  Streamer(const Problem* p, int fd, double* best) : problem_(p), fd_(fd), best_(best) {}
+  Streamer(const Streamer& o) = default;
+  CbcEventHandler* clone() const override { return new Streamer(*this); }
+  CbcAction event(CbcEvent e) override {
+    const Problem& P = *problem_;
+    if ((e == solution || e == heuristicSolution) && model_->bestSolution() &&
+        model_->getNumCols() == static_cast<int>(P.ilp_col.size())) {
+      const double* x = model_->bestSolution();
+      if (P.covers_all(x)) {
+        const auto s = P.cover_of(x, model_->getNumCols());
+        const double obj = P.objective(s);
+        if (obj < *best_ - 1e-9 && (!P.registration || P.components(s).size() <= 1)) {
+          *best_ = obj;
+          send(fd_, solution_line(P, s));
+        }
+      }
+    } else if (e == node) {
+      const double b = model_->getBestPossibleObjValue();
+      if (std::isfinite(b) && b > last_bound_ + 1e-9 && b < 1e20) {
+        last_bound_ = b;
+        char line[64];
+        std::snprintf(line, sizeof line, "B %.17g\n", b + P.forced_cost);
+        send(fd_, line);
+      }
+    }
+    return noAction;
+  }
+
+ private:
+  const Problem* problem_;
+  int fd_;
+  double* best_;
+  double last_bound_ = -1e300;
+};
+
+[[noreturn]] void run_worker(const Problem& P, int fd, Clock::time_point deadline) {
+  OsiClpSolverInterface solver;
+  {
+    const int n = static_cast<int>(P.ilp_col.size());
+    CoinPackedMatrix a(false, 0, 0);
+    a.setDimensions(0, n);
+    for (const auto& r : P.rows) {
+      std::vector<double> ones(r.size(), 1.0);
+      a.appendRow(static_cast<int>(r.size()), r.data(), ones.data());
+    }
+    std::vector<double> lb(n, 0.0), ub(n, 1.0), obj(n), rlb(P.rows.size(), 1.0), rub(P.rows.size(), COIN_DBL_MAX);
+    for (int j = 0; j < n; ++j) obj[j] = P.cost[P.ilp_col[j]];
+    solver.loadProblem(a, lb.data(), ub.data(), obj.data(), rlb.data(), rub.data());
+    for (int j = 0; j < n; ++j) solver.setInteger(j);
+    solver.messageHandler()->setLogLevel(0);
+  }
+  double best = 1e300;
+  std::size_t cuts = 0;
+  for (int round = 0;; ++round) {
+    const double left = std::chrono::duration<double>(deadline - Clock::now()).count();
+    if (left <= 0.05) {
+      send(fd, "E time limit\n");
+      ::_exit(0);
+    }
+    CbcModel model(solver);
+    CbcMain0(model);
+    model.setLogLevel(0);
+    model.messageHandler()->setLogLevel(0);
+    Streamer streamer(&P, fd, &best);
+    model.passInEventHandler(&streamer);
+    if (!P.warm.empty()) {
+      std::vector<std::pair<std::string, double>> start;
+      for (std::size_t j = 0; j < P.warm.size(); ++j) start.emplace_back(model.solver()->getColName(static_cast<int>(j)), P.warm[j]);
+      model.setMIPStart(start);
+    }
+    char sec[32];
+    std::snprintf(sec, sizeof sec, "%.3f", left);
+    const char* args[] = {"scancell", "-log", "0", "-preprocess", "off", "-sec", sec, "-solve", "-quit"};
+    CbcMain1(9, args, model);
+    send(fd, "R\n");  // one solve done
+    if (model.isProvenInfeasible()) {
+      // On a core problem infeasibility is the core's, not the instance's.
+      send(fd, P.core ? "E no connected cover within the core problem\n"
+                      : round == 0 ? "E infeasible: some row has no cover\n"
+                                   : "E infeasible: no cover is connected at this t_r\n");
+      ::_exit(0);
+    }
+    const double b = model.getBestPossibleObjValue();
+    if (std::isfinite(b) && b < 1e20) {
+      char line[64];
+      std::snprintf(line, sizeof line, "B %.17g\n", b + P.forced_cost);
+      send(fd, line);
+    }
+    const double* x = model.bestSolution();
+    if (!x) {
+      send(fd, "E time limit\n");
+      ::_exit(0);
+    }
+    const auto s = P.cover_of(x, model.getNumCols());
+    auto comps = P.registration ? P.components(s) : std::vector<std::vector<std::uint32_t>>{s};
+    if (comps.size() <= 1) {
+      if (P.objective(s) < best - 1e-9) {
+        best = P.objective(s);
+        send(fd, solution_line(P, s));
+      }
+      send(fd, model.isProvenOptimal() ? "E optimal\n" : "E time limit\n");
+      ::_exit(0);
+    }
+    // Disconnected: one cut per component, against a chosen view of the largest other component.
+    std::sort(comps.begin(), comps.end(), [](const auto& p1, const auto& p2) { return p1.size() > p2.size(); });
+    for (std::size_t c = 0; c < comps.size(); ++c) {
+      const auto& C = comps[c];
+      const std::uint32_t a = C.front(), bcol = comps[c == 0 ? 1 : 0].front();
+      std::vector<char> in_c(P.m->n_cols(), 0);
+      for (auto k : C) in_c[k] = 1;
+      std::vector<int> idx;
+      for (auto k0 : C)
+        for (auto k : P.neighbours(k0))
+          if (!in_c[k] && P.ilp_of[k] >= 0) idx.push_back(static_cast<int>(P.ilp_of[k]));
+      std::sort(idx.begin(), idx.end());
+      idx.erase(std::unique(idx.begin(), idx.end()), idx.end());
+      std::vector<double> el(idx.size(), 1.0);
+      double rhs = -1.0;  // Σ x_N − x_a − x_b ≥ −1, constants moved for forced views
+      for (std::uint32_t end : {a, bcol}) {
+        if (P.ilp_of[end] >= 0) {
+          idx.push_back(static_cast<int>(P.ilp_of[end]));
+          el.push_back(-1.0);
+        } else {
+          rhs += 1.0;  // forced: x = 1
+        }
+      }
+      if (idx.empty() && rhs > 0.0) {
+        send(fd, P.core ? "E no connected cover within the core problem\n"
+                        : "E infeasible: forced views cannot be connected at this t_r\n");
+        ::_exit(0);
+      }
+      solver.addRow(static_cast<int>(idx.size()), idx.data(), el.data(), rhs, COIN_DBL_MAX);
+      ++cuts;
+    }
+    char line[64];
+    std::snprintf(line, sizeof line, "C %zu\n", cuts);
+    send(fd, line);
+  }
+}
+
+}  // namespace
+
+CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>& w, const CoverSettings& st,
+                        const std::vector<double>& cost_in, ExactReport* report) {
+  const auto t0 = Clock::now();
+  if (w.size() != m.n_rows) throw std::invalid_argument("exact_cover: one weight per row required");
+  if (st.coverage_goal < 1.0 - 1e-12)
+    throw ConfigError("cover.mode exact covers every measurable row: the spec's coverage_goal must be 1");
+  ExactReport rep;
+  rep.solver = std::string("CBC ") + CBC_VERSION;
+  Problem P;
+  P.m = &m;
+  P.w = &w;
+  P.st = &st;
+  P.registration = registration_applies(st);
+  P.cost = cost_in.empty() ? std::vector<double>(m.n_cols(), 1.0) : cost_in;
+  if (P.cost.size() != m.n_cols()) throw std::invalid_argument("exact_cover: one cost per column required");
+  for (double c : P.cost)
+    if (!(c > 0.0) || !std::isfinite(c)) throw std::invalid_argument("exact_cover: column costs must be finite and > 0");
+  rep.columns = m.n_cols();
+
+  // Warm start and answer of record: greedy (constrained when registration applies), redundancy-eliminated.
+  CoverSettings gs = st;
+  gs.mode = P.registration ? CoverMode::constrained : CoverMode::greedy;
+  gs.coverage_goal = 1.0;
+  gs.eliminate_redundant = true;
+  const CoverResult greedy = greedy_cover(m, w, gs);
+
+  P.cols_of.assign(m.n_rows, {});
+  for (std::uint32_t j = 0; j < m.n_cols(); ++j) m.columns[j].for_each([&](std::uint32_t r) { P.cols_of[r].push_back(j); });
+  std::vector<char> row_alive(m.n_rows, 0), col_alive(m.n_cols(), 1), forced(m.n_cols(), 0);
+  for (std::uint32_t r = 0; r < m.n_rows; ++r) row_alive[r] = !P.cols_of[r].empty();
+  rep.rows = static_cast<std::size_t>(std::count(row_alive.begin(), row_alive.end(), 1));
+  bool greedy_feasible = true;
+  {
+    std::vector<char> cov(m.n_rows, 0);
+    for (auto j : greedy.views) m.columns[j].for_each([&](std::uint32_t r) { cov[r] = 1; });
+    for (std::uint32_t r = 0; r < m.n_rows; ++r) greedy_feasible &= !row_alive[r] || cov[r];
+    greedy_feasible &= !P.registration || greedy.registration_components <= 1;
+  }
+  if (greedy_feasible)
+    for (auto j : greedy.views) rep.greedy_objective += P.cost[j];
+
+  // ---- presolve ----
+  std::vector<std::int64_t> dominator(m.n_cols(), -1);  // dropped column -> a column covering its rows
+  const std::uint64_t budget = 400'000'000;
+  std::uint64_t work = 0;
+  auto alive_cols = [&](std::uint32_t r) {
+    std::vector<std::uint32_t> out;
+    for (auto j : P.cols_of[r])
+      if (col_alive[j]) out.push_back(j);
+    return out;
+  };
+  for (int round = 0; round < 8; ++round) {
+    bool changed = false;
+    // Forced columns: the only cover of some row.
+    for (std::uint32_t r = 0; r < m.n_rows; ++r) {
+      if (!row_alive[r]) continue;
+      const auto cs = alive_cols(r);
+      if (cs.size() != 1) continue;
+      const std::uint32_t j = cs.front();
+      forced[j] = 1;
+      col_alive[j] = 0;
+      ++rep.forced_columns;
+      m.columns[j].for_each([&](std::uint32_t q) { row_alive[q] = 0; });
+      changed = true;
+    }
+    // Identical rows.
+    std::map<std::vector<std::uint32_t>, std::uint32_t> seen;
+    std::vector<std::vector<std::uint32_t>> row_cols(m.n_rows);
+    for (std::uint32_t r = 0; r < m.n_rows; ++r) {
+      if (!row_alive[r]) continue;
+      row_cols[r] = alive_cols(r);
+      if (!seen.emplace(row_cols[r], r).second) {
+        row_alive[r] = 0;
+        ++rep.merged_rows;
+        changed = true;
+      }
+    }
+    // Row dominance: cols(A) ⊆ cols(B) makes B redundant. Candidates B share A's rarest column.
+    std::vector<std::vector<std::uint32_t>> rows_of_col(m.n_cols());
+    for (std::uint32_t r = 0; r < m.n_rows; ++r)
+      if (row_alive[r])
+        for (auto j : row_cols[r]) rows_of_col[j].push_back(r);
+    std::vector<std::uint32_t> order;
+    for (std::uint32_t r = 0; r < m.n_rows; ++r)
+      if (row_alive[r]) order.push_back(r);
+    std::sort(order.begin(), order.end(), [&](auto a, auto b) {
+      return row_cols[a].size() != row_cols[b].size() ? row_cols[a].size() < row_cols[b].size() : a < b;
+    });
+    for (auto a : order) {
+      if (!row_alive[a] || work > budget) continue;
+      std::uint32_t rare = row_cols[a].front();
+      for (auto j : row_cols[a])
+        if (rows_of_col[j].size() < rows_of_col[rare].size()) rare = j;
+      for (auto b : rows_of_col[rare]) {
+        if (b == a || !row_alive[b] || row_cols[b].size() < row_cols[a].size()) continue;
+        work += row_cols[a].size() + row_cols[b].size();
+        if (std::includes(row_cols[b].begin(), row_cols[b].end(), row_cols[a].begin(), row_cols[a].end())) {
+          row_alive[b] = 0;
+          ++rep.dominated_rows;
+          changed = true;
+        }
+      }
+    }
+    // Column dominance (no registration constraint): rows(j) ⊆ rows(k) and c_k ≤ c_j.
+    if (!P.registration) {
+      std::vector<std::vector<std::uint32_t>> col_rows(m.n_cols());
+      for (std::uint32_t r = 0; r < m.n_rows; ++r)
+        if (row_alive[r])
+          for (auto j : P.cols_of[r])
+            if (col_alive[j]) col_rows[j].push_back(r);
+      for (std::uint32_t j = 0; j < m.n_cols(); ++j) {
+        if (!col_alive[j]) continue;
+        if (col_rows[j].empty()) {
+          col_alive[j] = 0;  // covers nothing that is left
+          continue;
+        }
+        if (work > budget) continue;
+        std::uint32_t rare = col_rows[j].front();
+        for (auto r : col_rows[j])
+          if (row_cols[r].size() < row_cols[rare].size()) rare = r;
+        for (auto k : P.cols_of[rare]) {
+          if (k == j || !col_alive[k] || P.cost[k] > P.cost[j] || col_rows[k].size() < col_rows[j].size()) continue;
+          const bool same = col_rows[k].size() == col_rows[j].size() && P.cost[k] == P.cost[j];
+          if (same && k > j) continue;  // identical twins: keep the lower index
+          work += col_rows[j].size() + col_rows[k].size();
+          if (std::includes(col_rows[k].begin(), col_rows[k].end(), col_rows[j].begin(), col_rows[j].end())) {
+            col_alive[j] = 0;
+            dominator[j] = k;
+            ++rep.dominated_columns;
+            changed = true;
+            break;
+          }
+        }
+      }
+    }
+    if (!changed) break;
+  }
+  rep.dominance_budget_hit = work > budget;
+
+  // ---- the program ----
+  P.ilp_of.assign(m.n_cols(), -1);
+  for (std::uint32_t j = 0; j < m.n_cols(); ++j) {
+    if (forced[j]) {
+      P.forced.push_back(j);
+      P.forced_cost += P.cost[j];
+    } else if (col_alive[j]) {
+      P.ilp_of[j] = static_cast<std::int64_t>(P.ilp_col.size());
+      P.ilp_col.push_back(j);
+    }
+  }
+  for (std::uint32_t r = 0; r < m.n_rows; ++r) {
+    if (!row_alive[r]) continue;
+    std::vector<int> row;
+    for (auto j : P.cols_of[r])
+      if (P.ilp_of[j] >= 0) row.push_back(static_cast<int>(P.ilp_of[j]));
+    P.rows.push_back(std::move(row));
+  }
+  rep.rows_after_presolve = P.rows.size();
+  rep.columns_after_presolve = P.ilp_col.size();
+
+  // Lower bound that needs no solver: rows with pairwise disjoint covers each need their own column.
+  {
+    std::vector<char> used(P.ilp_col.size(), 0);
+    std::vector<std::size_t> order(P.rows.size());
+    std::iota(order.begin(), order.end(), 0);
+    std::sort(order.begin(), order.end(), [&](auto a, auto b) { return P.rows[a].size() < P.rows[b].size(); });
+    double lb = 0.0;
+    for (auto i : order) {
+      bool disjoint = true;
+      for (int j : P.rows[i]) disjoint &= !used[j];
+      if (!disjoint) continue;
+      double cheapest = 1e300;
+      for (int j : P.rows[i]) used[j] = 1, cheapest = std::min(cheapest, P.cost[P.ilp_col[j]]);
+      lb += cheapest;
+    }
+    rep.bound = P.forced_cost + lb;
+  }
+
+  // Lagrangian bound (subgradient on the row constraints): close to the LP bound at a fraction of the root
+  // LP's cost, and valid whatever CBC manages before the time limit. A quarter of the limit at most.
+  if (!P.rows.empty()) {
+    const std::size_t nc = P.ilp_col.size();
+    std::vector<std::vector<int>> rows_of(nc);
+    for (std::size_t i = 0; i < P.rows.size(); ++i)
+      for (int j : P.rows[i]) rows_of[j].push_back(static_cast<int>(i));
+    std::vector<double> c(nc), u(P.rows.size()), reduced(nc), g(P.rows.size());
+    for (std::size_t j = 0; j < nc; ++j) c[j] = P.cost[P.ilp_col[j]];
+    for (std::size_t i = 0; i < P.rows.size(); ++i) {
+      double best = 1e300;
+      for (int j : P.rows[i]) best = std::min(best, c[j] / static_cast<double>(rows_of[j].size()));
+      u[i] = best;
+    }
+    const double ub = rep.greedy_objective > 0.0 ? rep.greedy_objective - P.forced_cost : 1e9;
+    const auto lag_deadline = t0 + std::chrono::duration_cast<Clock::duration>(
+                                       std::chrono::duration<double>(std::min(2.0, 0.25 * st.exact_time_limit_s)));
+    double lambda = 2.0, best_l = -1e300;
+    std::vector<double> best_reduced;
+    int since_better = 0;
+    for (int it = 0; it < 5000 && lambda > 1e-4 && Clock::now() < lag_deadline; ++it) {
+      double l = std::accumulate(u.begin(), u.end(), 0.0);
+      for (std::size_t j = 0; j < nc; ++j) {
+        double s = c[j];
+        for (int i : rows_of[j]) s -= u[i];
+        reduced[j] = s;
+        if (s < 0.0) l += s;
+      }
+      if (l > best_l + 1e-9) best_l = l, since_better = 0, best_reduced = reduced;
+      else if (++since_better >= 20) lambda *= 0.5, since_better = 0;
+      double norm = 0.0;
+      for (std::size_t i = 0; i < P.rows.size(); ++i) {
+        double covered = 0.0;
+        for (int j : P.rows[i]) covered += reduced[j] < 0.0 ? 1.0 : 0.0;
+        g[i] = 1.0 - covered;
+        if (u[i] <= 0.0 && g[i] < 0.0) g[i] = 0.0;  // projected: u stays ≥ 0
+        norm += g[i] * g[i];
+      }
+      if (norm == 0.0) break;  // the relaxed solution is feasible: L is the LP optimum
+      const double step = lambda * std::max(ub - l, 1e-3) / norm;
+      for (std::size_t i = 0; i < P.rows.size(); ++i) u[i] = std::max(0.0, u[i] + step * g[i]);
+    }
+    // With integer costs the optimum is an integer: round the bound up (with a little slack for rounding).
+    bool integer_costs = true;
+    for (double cj : c) integer_costs &= cj == std::floor(cj);
+    const double lag = integer_costs ? std::ceil(best_l - 1e-6) : best_l;
+    rep.lagrangian_bound = P.forced_cost + lag;
+    rep.bound = std::max(rep.bound, rep.lagrangian_bound);
+
+    // Core problem (Caprara, Fischetti, Toth): on large instances CBC cannot finish even the root LP in the
+    // limit, so it gets the columns that matter: per row the few with the smallest Lagrangian reduced cost,
+    // plus the warm start. Its covers are covers of the full problem; optimality on the core is not proven
+    // for the full problem, the Lagrangian bound stays the bound.
+    std::size_t nnz = 0;
+    for (const auto& r : P.rows) nnz += r.size();
+    if (nnz > 300'000 && !best_reduced.empty()) {
+      constexpr std::size_t kPerRow = 6;
+      std::vector<char> in_core(nc, 0);
+      for (const auto& r : P.rows) {
+        std::vector<int> byc(r.begin(), r.end());
+        const std::size_t k = std::min(kPerRow, byc.size());
+        std::partial_sort(byc.begin(), byc.begin() + static_cast<long>(k), byc.end(), [&](int a, int b) {
+          return best_reduced[a] != best_reduced[b] ? best_reduced[a] < best_reduced[b] : a < b;
+        });
+        for (std::size_t i = 0; i < k; ++i) in_core[byc[i]] = 1;
+      }
+      for (auto j0 : greedy.views) {
+        std::int64_t j = j0;
+        while (j >= 0 && !col_alive[j] && !forced[j]) j = dominator[j];
+        if (j >= 0 && P.ilp_of[j] >= 0) in_core[P.ilp_of[j]] = 1;
+      }
+      std::vector<std::uint32_t> core_cols;
+      std::vector<std::int64_t> remap(nc, -1);
+      for (std::size_t j = 0; j < nc; ++j)
+        if (in_core[j]) remap[j] = static_cast<std::int64_t>(core_cols.size()), core_cols.push_back(P.ilp_col[j]);
+      for (auto& r : P.rows) {
+        std::vector<int> nr;
+        for (int j : r)
+          if (remap[j] >= 0) nr.push_back(static_cast<int>(remap[j]));
+        r = std::move(nr);
+      }
+      std::fill(P.ilp_of.begin(), P.ilp_of.end(), -1);
+      for (std::size_t j = 0; j < core_cols.size(); ++j) P.ilp_of[core_cols[j]] = static_cast<std::int64_t>(j);
+      P.ilp_col = std::move(core_cols);
+      rep.core_columns = P.ilp_col.size();
+      P.core = true;
+    }
+  }
+
+  // Warm start in the reduced space: greedy's views, a dropped view replaced by its dominator.
+  if (greedy_feasible) {
+    P.warm.assign(P.ilp_col.size(), 0.0);
+    for (auto j0 : greedy.views) {
+      std::int64_t j = j0;
+      while (j >= 0 && !col_alive[j] && !forced[j]) j = dominator[j];
+      if (j >= 0 && P.ilp_of[j] >= 0) P.warm[P.ilp_of[j]] = 1.0;
+    }
+    if (!P.covers_all(P.warm.data())) P.warm.clear();  // cannot happen; never hand CBC a wrong start
+  }
+
+  std::vector<std::uint32_t> best_set = greedy_feasible ? greedy.views : std::vector<std::uint32_t>{};
+  double best_obj = greedy_feasible ? rep.greedy_objective : 1e300;
+  std::string end_status;
+  const auto deadline = t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(st.exact_time_limit_s));
+
+  auto take = [&](std::vector<std::uint32_t> s, double obj) {
+    if (obj < best_obj - 1e-9) {
+      best_obj = obj;
+      best_set = std::move(s);
+      ++rep.improved_solutions;
+    }
+  };
+  const bool trivial_connected = !P.registration || P.components(P.forced).size() <= 1;
+  if (P.rows.empty() && trivial_connected) {
+    take(P.forced, P.forced_cost);
+    end_status = "optimal";
+  } else {
+    int fds[2];
+    if (::pipe(fds) != 0) throw std::runtime_error(std::string("exact_cover: pipe: ") + std::strerror(errno));
+    std::fflush(nullptr);
+    const pid_t pid = ::fork();
+    if (pid < 0) {
+      ::close(fds[0]);
+      ::close(fds[1]);
+      throw std::runtime_error(std::string("exact_cover: fork: ") + std::strerror(errno));
+    }
+    if (pid == 0) {
+      ::close(fds[0]);
+      run_worker(P, fds[1], deadline);
+    }
+    ::close(fds[1]);
+    std::string buf;
+    bool done = false;
+    auto handle = [&](const std::string& line) {
+      std::istringstream in(line);
+      char kind = 0;
+      in >> kind;
+      if (kind == 'S') {
+        double obj = 0.0;
+        in >> obj;
+        std::vector<std::uint32_t> s;
+        for (std::uint32_t j; in >> j;) s.push_back(j);
+        take(std::move(s), obj);
+      } else if (kind == 'B') {
+        double b = 0.0;
+        in >> b;
+        if (!rep.core_columns) rep.bound = std::max(rep.bound, b);  // a core's bound says nothing of the whole
+      } else if (kind == 'C') {
+        in >> rep.connectivity_cuts;
+      } else if (kind == 'R') {
+        ++rep.solves;
+      } else if (kind == 'E') {
+        std::getline(in >> std::ws, end_status);
+        done = true;
+      }
+    };
+    while (!done) {
+      const double left_ms = std::chrono::duration<double, std::milli>(deadline - Clock::now()).count() + 250.0;
+      if (left_ms <= 0.0) break;
+      pollfd pfd{fds[0], POLLIN, 0};
+      const int pr = ::poll(&pfd, 1, static_cast<int>(std::min(left_ms, 1000.0)));
+      if (pr < 0 && errno == EINTR) continue;
+      if (pr <= 0) continue;
+      char chunk[65536];
+      const ssize_t n = ::read(fds[0], chunk, sizeof chunk);
+      if (n <= 0) break;  // worker exited (or died)
+      buf.append(chunk, static_cast<std::size_t>(n));
+      for (std::size_t nl; (nl = buf.find('\n')) != std::string::npos;) {
+        handle(buf.substr(0, nl));
+        buf.erase(0, nl + 1);
+      }
+    }
+    ::kill(pid, SIGKILL);
+    int status = 0;
+    while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+    }
+    ::close(fds[0]);
+    if (end_status.empty()) end_status = done ? "time limit" : "time limit (solver stopped)";
+  }
+
+  if (rep.core_columns && end_status == "optimal") end_status = "optimal on the core problem";
+  rep.proven_optimal = end_status == "optimal";
+  if (rep.proven_optimal) rep.bound = best_obj;
+  const bool infeasible = end_status.rfind("infeasible", 0) == 0;
+  if (best_set.empty() && !infeasible && rep.rows > 0) end_status = "time limit, no feasible cover found";
+  rep.objective = best_set.empty() ? 0.0 : best_obj;
+  rep.bound = std::min(rep.bound, rep.objective > 0.0 ? rep.objective : rep.bound);
+  rep.gap = rep.objective > 0.0 ? (rep.objective - rep.bound) / rep.objective : 0.0;
+  if (!rep.proven_optimal && !infeasible && rep.improved_solutions == 0 && greedy_feasible)
+    end_status = "greedy kept: " + end_status;
+  rep.status = end_status;
+  rep.seconds = seconds_since(t0);
+
+  // No feasible cover (infeasible, or none in time): keep greedy's partial cover rather than nothing, and say so.
+  const bool partial = best_set.empty();
+  if (partial) {
+    best_set = greedy.views;
+    rep.status += "; greedy's partial cover kept";
+  }
+  CoverResult res = describe_cover(m, w, st, partial ? best_set : order_by_gain(m, w, st, best_set));
+  char reason[160];
+  std::snprintf(reason, sizeof reason, "exact (%s): %s, %g views, bound %g, gap %.3f", rep.solver.c_str(),
+                rep.status.c_str(), rep.objective, rep.bound, rep.gap);
+  res.stop_reason = reason;
+  if (report) *report = rep;
+  return res;
+}
+
+}  // namespace scancell::planner

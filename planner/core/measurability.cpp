@@ -1,0 +1,300 @@
+#include "planner/core/measurability.hpp"
+
+#include "planner/errors.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+
+#include <tbb/parallel_for.h>
+
+namespace scancell::planner {
+namespace {
+
+constexpr std::uint32_t kBlock = 32;  // rows per culling block (consecutive in Morton order)
+constexpr std::size_t kPairsPerFlush = 128;  // 256 occlusion rays per Embree stream
+
+struct Block {
+  Eigen::Vector3d centre;
+  double radius;
+};
+
+std::vector<Block> make_blocks(const RoughModel& rough) {
+  std::vector<Block> blocks;
+  for (std::uint32_t b = 0; b < rough.size(); b += kBlock) {
+    const std::uint32_t e = std::min<std::uint32_t>(b + kBlock, rough.size());
+    Eigen::Vector3d lo = rough.points[b], hi = rough.points[b];
+    for (std::uint32_t i = b; i < e; ++i) {
+      lo = lo.cwiseMin(rough.points[i]);
+      hi = hi.cwiseMax(rough.points[i]);
+    }
+    const Eigen::Vector3d c = 0.5 * (lo + hi);
+    double r = 0.0;
+    for (std::uint32_t i = b; i < e; ++i) r = std::max(r, (rough.points[i] - c).norm());
+    blocks.push_back({c, r});
+  }
+  return blocks;
+}
+
+double ray_offset(const RoughModel& rough, const MatrixSettings& st) {
+  return st.ray_offset_mm > 0.0 ? st.ray_offset_mm : 0.01 * rough.mean_edge_mm;
+}
+
+/// Conservative: false only when no point of the sphere can be inside the frustum.
+bool sphere_may_touch_frustum(const SensorModel& s, const FrustumTerms& f, double scan_length_mm, const Eigen::Vector3d& c,
+                              double r) {
+  const double z = -c.z();
+  if (z + r < s.range_min_mm || z - r > s.range_max_mm) return false;
+  const double zfar = z + r;
+  if (std::abs(c.x()) - r > zfar * f.tan_half_x) return false;
+  const double half_y = s.kind == SensorKind::line_scan ? 0.5 * scan_length_mm : zfar * f.tan_half_y;
+  return std::abs(c.y()) - r <= half_y;
+}
+
+/// The occlusion rays of a pair: from just off the surface to the laser source and to the receiver, and with a
+/// near-miss margin m also to both displaced by ±m along camera x and y (10 rays instead of 2).
+void pair_rays(const Eigen::Vector3d& s, const Eigen::Vector3d& n, const Viewpoint& v, const Eigen::Matrix3d& r,
+               const PointTest& t, double eps, double margin, OcclusionRay* out) {
+  const Eigen::Vector3d origin = s + eps * n;
+  const Eigen::Vector3d yc = r.col(1), xc = r.col(0);
+  const Eigen::Vector3d ends[2] = {v.position + t.laser_y_mm * yc, v.position + t.receiver_y_mm * yc};
+  const Eigen::Vector3d shifts[5] = {Eigen::Vector3d::Zero(), margin * xc, -margin * xc, margin * yc, -margin * yc};
+  const int n_shift = margin > 0.0 ? 5 : 1;
+  int k = 0;
+  for (const auto& end : ends)
+    for (int q = 0; q < n_shift; ++q, ++k) {
+      const Eigen::Vector3d d = end + shifts[q] - origin;
+      out[k].origin = origin.cast<float>();
+      out[k].dir = d.cast<float>();
+      out[k].t_near = 0.0f;
+      out[k].t_far = static_cast<float>(1.0 - eps / std::max(d.norm(), eps * 2.0));
+    }
+}
+
+struct Counters {
+  std::atomic<std::uint64_t> block_culled{0}, in_frustum{0}, surviving{0}, compliant{0}, rays{0}, measurable{0};
+  void export_to(MatrixStats* stats, std::uint64_t total) const {
+    if (!stats) return;
+    stats->pairs_total = total;
+    stats->pairs_block_culled = block_culled;
+    stats->pairs_in_frustum = in_frustum;
+    stats->pairs_surviving = surviving;
+    stats->pairs_compliant = compliant;
+    stats->rays_cast = rays;
+    stats->pairs_measurable = measurable;
+  }
+};
+
+}  // namespace
+
+SensorModel detuned_sensor(const SensorModel& sensor, const Countermeasures& c) {
+  SensorModel s = sensor;
+  s.range_min_mm += c.dof_margin_mm;
+  s.range_max_mm = std::max(s.range_min_mm, s.range_max_mm - c.dof_margin_mm);
+  return s;
+}
+
+ModelSpec detuned_spec(const ModelSpec& spec, const Countermeasures& c) {
+  ModelSpec s = spec;
+  s.precision_mm /= 1.0 + c.compliance_buffer;
+  s.density_per_mm2 *= 1.0 + c.compliance_buffer;
+  return s;
+}
+
+MeasurabilityColumn::MeasurabilityColumn(std::vector<std::uint32_t> sorted_rows, std::uint32_t n_rows)
+    : count_(static_cast<std::uint32_t>(sorted_rows.size())) {
+  const std::size_t words = (n_rows + 63) / 64;
+  if (sorted_rows.size() * 4 > words * 8) {
+    bits_.assign(words, 0);
+    for (auto r : sorted_rows) bits_[r >> 6] |= 1ull << (r & 63);
+  } else {
+    rows_ = std::move(sorted_rows);
+    rows_.shrink_to_fit();
+  }
+}
+
+bool MeasurabilityColumn::contains(std::uint32_t row) const {
+  if (!bits_.empty()) return (row >> 6) < bits_.size() && (bits_[row >> 6] >> (row & 63) & 1);
+  return std::binary_search(rows_.begin(), rows_.end(), row);
+}
+
+std::vector<std::uint32_t> MeasurabilityColumn::rows() const {
+  std::vector<std::uint32_t> out;
+  out.reserve(count_);
+  for_each([&](std::uint32_t r) { out.push_back(r); });
+  return out;
+}
+
+std::size_t MeasurabilityMatrix::nonzeros() const {
+  std::size_t n = 0;
+  for (const auto& c : columns) n += c.count();
+  return n;
+}
+
+double MeasurabilityMatrix::density() const {
+  const double cells = static_cast<double>(n_rows) * static_cast<double>(columns.size());
+  return cells > 0 ? nonzeros() / cells : 0.0;
+}
+
+std::size_t MeasurabilityMatrix::memory_bytes() const {
+  std::size_t b = columns.capacity() * sizeof(MeasurabilityColumn);
+  for (const auto& c : columns) b += c.memory_bytes();
+  return b;
+}
+
+std::vector<std::uint32_t> MeasurabilityMatrix::unmeasurable_rows() const {
+  std::vector<char> seen(n_rows, 0);
+  for (const auto& c : columns) c.for_each([&](std::uint32_t r) { seen[r] = 1; });
+  std::vector<std::uint32_t> out;
+  for (std::uint32_t r = 0; r < n_rows; ++r)
+    if (!seen[r]) out.push_back(r);
+  return out;
+}
+
+MeasurabilityMatrix build_measurability(const RoughModel& rough, const OcclusionScene& scene, const SensorModel& sensor_in,
+                                        const ModelSpec& spec_in, const std::vector<Viewpoint>& candidates,
+                                        const MatrixSettings& settings, MatrixStats* stats, const std::atomic<int>* cancel) {
+  MeasurabilityMatrix m;
+  m.n_rows = static_cast<std::uint32_t>(rough.size());
+  m.columns.resize(candidates.size());
+  const auto blocks = make_blocks(rough);
+  const double eps = ray_offset(rough, settings);
+  const Countermeasures& cm = settings.countermeasures;
+  // Detuned tests (thesis 7.4.7): the density formula keeps the real Φx (the sample spacing does not change),
+  // only the frustum test uses the narrowed width.
+  const SensorModel tested = detuned_sensor(sensor_in, cm);
+  const ModelSpec spec = detuned_spec(spec_in, cm);
+  const SensorModel& sensor = tested;
+  FrustumTerms terms(sensor_in);
+  terms.tan_half_x *= 1.0 - cm.frustum_detune;
+  terms.tan_half_y *= 1.0 - cm.frustum_detune;
+  const double length_factor = 1.0 - cm.frustum_detune;
+  const std::size_t per_pair = cm.visibility_margin_mm > 0.0 ? 10 : 2;
+  Counters cnt;
+
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, candidates.size(), 4), [&](const auto& range) {
+    std::vector<std::uint32_t> pending_rows;
+    std::vector<OcclusionRay> rays;
+    std::vector<std::uint8_t> occ(per_pair * kPairsPerFlush);
+    std::vector<std::uint32_t> column;
+    pending_rows.reserve(kPairsPerFlush);
+    rays.reserve(per_pair * kPairsPerFlush);
+    for (std::size_t j = range.begin(); j != range.end(); ++j) {
+      if (cancel && cancel->load(std::memory_order_relaxed) != 0) return;  // the caller stops planning
+      const Viewpoint& v = candidates[j];
+      const Eigen::Matrix3d r = v.rotation();
+      const Eigen::Matrix3d rt = r.transpose();
+      const double scan_length = v.scan_length_mm * length_factor;
+      std::uint64_t culled = 0, in_frustum = 0, surviving = 0, compliant = 0, measured = 0;
+      column.clear();
+      auto flush = [&] {
+        if (pending_rows.empty()) return;
+        scene.occluded(rays.data(), rays.size(), occ.data());
+        for (std::size_t p = 0; p < pending_rows.size(); ++p) {
+          bool clear = true;
+          for (std::size_t q = 0; q < per_pair; ++q) clear &= !occ[per_pair * p + q];
+          if (clear) column.push_back(pending_rows[p]);
+        }
+        pending_rows.clear();
+        rays.clear();
+      };
+      for (std::uint32_t b = 0; b < blocks.size(); ++b) {
+        const std::uint32_t begin = b * kBlock, end = std::min<std::uint32_t>(begin + kBlock, m.n_rows);
+        if (!sphere_may_touch_frustum(sensor, terms, scan_length, rt * (blocks[b].centre - v.position), blocks[b].radius)) {
+          culled += end - begin;
+          continue;
+        }
+        for (std::uint32_t i = begin; i < end; ++i) {
+          const Eigen::Vector3d pc = rt * (rough.points[i] - v.position);
+          PointTest t = test_point(sensor, terms, spec, scan_length, pc, rt * rough.normals[i]);
+          if (t.compliant && length_factor < 1.0) {
+            // Density uses the real sweep length: detuning narrows where we trust the view, not its sampling.
+            const PointTest real = test_point(sensor, terms, spec, v.scan_length_mm, pc, rt * rough.normals[i]);
+            t.compliant = real.compliant;
+          }
+          in_frustum += t.in_frustum;
+          surviving += t.facing;
+          if (!t.compliant) continue;
+          ++compliant;
+          pending_rows.push_back(i);
+          rays.resize(rays.size() + per_pair);
+          pair_rays(rough.points[i], rough.normals[i], v, r, t, eps, cm.visibility_margin_mm, &rays[rays.size() - per_pair]);
+          if (pending_rows.size() == kPairsPerFlush) flush();
+        }
+      }
+      flush();
+      measured = column.size();
+      m.columns[j] = MeasurabilityColumn(column, m.n_rows);
+      cnt.block_culled += culled;
+      cnt.in_frustum += in_frustum;
+      cnt.surviving += surviving;
+      cnt.compliant += compliant;
+      cnt.rays += per_pair * compliant;
+      cnt.measurable += measured;
+    }
+  });
+  if (cancel && cancel->load() != 0)
+    throw PlanCancelled("planning stopped by request while building the measurability matrix (" + std::to_string(candidates.size()) +
+                        " candidates)");
+  cnt.export_to(stats, static_cast<std::uint64_t>(m.n_rows) * candidates.size());
+  return m;
+}
+
+MeasurabilityMatrix build_measurability_naive(const RoughModel& rough, const OcclusionScene& scene,
+                                              const SensorModel& sensor, const ModelSpec& spec,
+                                              const std::vector<Viewpoint>& candidates, const MatrixSettings& settings,
+                                              MatrixStats* stats) {
+  MeasurabilityMatrix m;
+  m.n_rows = static_cast<std::uint32_t>(rough.size());
+  m.columns.resize(candidates.size());
+  const double eps = ray_offset(rough, settings);
+  const FrustumTerms terms(sensor);
+  Counters cnt;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, candidates.size(), 1), [&](const auto& range) {
+    std::vector<OcclusionRay> rays(2 * kPairsPerFlush);
+    std::vector<std::uint8_t> occ(2 * kPairsPerFlush);
+    std::vector<PointTest> tests(kPairsPerFlush);
+    for (std::size_t j = range.begin(); j != range.end(); ++j) {
+      const Viewpoint& v = candidates[j];
+      const Eigen::Matrix3d r = v.rotation();
+      const Eigen::Matrix3d rt = r.transpose();
+      std::vector<std::uint32_t> column;
+      for (std::uint32_t b = 0; b < m.n_rows; b += kPairsPerFlush) {
+        const std::uint32_t e = std::min<std::uint32_t>(b + kPairsPerFlush, m.n_rows);
+        for (std::uint32_t i = b; i < e; ++i) {
+          const Eigen::Vector3d pc = rt * (rough.points[i] - v.position);
+          PointTest t = test_point(sensor, terms, spec, v.scan_length_mm, pc, rt * rough.normals[i]);
+          if (!t.in_frustum) {  // rays go where the laser would be for this y, in or out of the frustum
+            t.laser_y_mm = sensor.kind == SensorKind::line_scan ? pc.y() : 0.0;
+            t.receiver_y_mm = t.laser_y_mm + sensor.baseline_mm;
+          }
+          tests[i - b] = t;
+          pair_rays(rough.points[i], rough.normals[i], v, r, t, eps, 0.0, &rays[2 * (i - b)]);
+        }
+        scene.occluded(rays.data(), 2 * (e - b), occ.data());
+        cnt.rays += 2 * (e - b);
+        for (std::uint32_t i = b; i < e; ++i)
+          if (tests[i - b].compliant && !occ[2 * (i - b)] && !occ[2 * (i - b) + 1]) column.push_back(i);
+      }
+      cnt.measurable += column.size();
+      m.columns[j] = MeasurabilityColumn(column, m.n_rows);
+    }
+  });
+  cnt.export_to(stats, static_cast<std::uint64_t>(m.n_rows) * candidates.size());
+  return m;
+}
+
+bool measurable(const RoughModel& rough, const OcclusionScene& scene, const SensorModel& sensor, const ModelSpec& spec,
+                const Viewpoint& v, std::uint32_t row, const MatrixSettings& settings) {
+  const Eigen::Matrix3d r = v.rotation();
+  const PointTest t =
+      test_point(sensor, spec, v.scan_length_mm, r.transpose() * (rough.points[row] - v.position), r.transpose() * rough.normals[row]);
+  if (!t.compliant) return false;
+  OcclusionRay rays[2];
+  pair_rays(rough.points[row], rough.normals[row], v, r, t, ray_offset(rough, settings), 0.0, rays);
+  std::uint8_t occ[2];
+  scene.occluded(rays, 2, occ);
+  return !occ[0] && !occ[1];
+}
+
+}  // namespace scancell::planner

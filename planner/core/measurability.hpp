@@ -1,0 +1,114 @@
+#pragma once
+#include <atomic>
+// The measurability matrix M (thesis 3.3): rows are rough-model points, columns candidate viewpoints;
+// m_ij = 1 when point i lies in viewpoint j's frustum, is visible to both laser and receiver, and its
+// predicted precision (eq. 3.4) and sampling density (eq. 3.8) meet the model specification.
+#include <cstdint>
+#include <vector>
+
+#include "planner/core/rough_model.hpp"
+#include "planner/geometry/scene.hpp"
+#include "planner/core/sensor.hpp"
+#include "planner/core/viewpoint.hpp"
+
+namespace scancell::planner {
+
+/// One column, stored as a sorted row list or as a bitset over all rows, whichever is smaller.
+class MeasurabilityColumn {
+ public:
+  MeasurabilityColumn() = default;
+  MeasurabilityColumn(std::vector<std::uint32_t> sorted_rows, std::uint32_t n_rows);
+
+  std::uint32_t count() const { return count_; }
+  bool is_bitset() const { return !bits_.empty(); }
+  bool contains(std::uint32_t row) const;
+  std::size_t memory_bytes() const { return rows_.capacity() * 4 + bits_.capacity() * 8; }
+
+  template <class F>
+  void for_each(F&& f) const {
+    if (bits_.empty()) {
+      for (auto r : rows_) f(r);
+      return;
+    }
+    for (std::size_t w = 0; w < bits_.size(); ++w) {
+      std::uint64_t b = bits_[w];
+      while (b) {
+        const int t = __builtin_ctzll(b);
+        f(static_cast<std::uint32_t>(w * 64 + t));
+        b &= b - 1;
+      }
+    }
+  }
+  std::vector<std::uint32_t> rows() const;
+
+ private:
+  std::vector<std::uint32_t> rows_;
+  std::vector<std::uint64_t> bits_;
+  std::uint32_t count_ = 0;
+};
+
+struct MeasurabilityMatrix {
+  std::uint32_t n_rows = 0;
+  std::vector<MeasurabilityColumn> columns;
+
+  std::size_t n_cols() const { return columns.size(); }
+  std::size_t nonzeros() const;
+  double density() const;  // nonzeros / (rows × cols)
+  std::size_t memory_bytes() const;
+  /// Rows no column measures.
+  std::vector<std::uint32_t> unmeasurable_rows() const;
+};
+
+struct MatrixStats {
+  std::uint64_t pairs_total = 0;        // rows × columns
+  std::uint64_t pairs_block_culled = 0; // skipped with their whole block (bounding sphere outside the frustum)
+  std::uint64_t pairs_in_frustum = 0;
+  std::uint64_t pairs_surviving = 0;    // in frustum and facing both laser and receiver
+  std::uint64_t pairs_compliant = 0;    // ... and meeting thresholds, precision, density: these cast rays
+  std::uint64_t rays_cast = 0;
+  std::uint64_t pairs_measurable = 0;
+};
+
+/// Measurability countermeasures against positioner pose error (thesis 7.4.7): detuned tests that leave a
+/// margin, sized from tables 7.3-7.5 (pose_error.hpp: countermeasures_for).
+struct Countermeasures {
+  double frustum_detune = 0.0;       // shrink the frustum's width and the sweep length by this fraction
+  double dof_margin_mm = 0.0;        // raise R_min and lower R_max by this much
+  double compliance_buffer = 0.0;    // require σz ≤ spec/(1 + b) and ρ ≥ spec·(1 + b)
+  double visibility_margin_mm = 0.0; // near-miss visibility: laser and receiver displaced by ± this in camera
+                                     // x and y must see the point too
+  bool any() const { return frustum_detune > 0 || dof_margin_mm > 0 || compliance_buffer > 0 || visibility_margin_mm > 0; }
+};
+
+/// The sensor and specification the detuned tests use (depth of field shrunk, spec tightened); the frustum's
+/// width and sweep length are narrowed by the matrix builder itself (the sample spacing does not change).
+SensorModel detuned_sensor(const SensorModel& sensor, const Countermeasures& c);
+ModelSpec detuned_spec(const ModelSpec& spec, const Countermeasures& c);
+
+struct MatrixSettings {
+  /// Occlusion rays start this far off the surface along the normal, and stop this short of the sensor.
+  /// Zero means: 1 % of the rough model's mean edge length.
+  double ray_offset_mm = 0.0;
+  Countermeasures countermeasures;  // none by default
+};
+
+/// Builds M in parallel over candidates (oneTBB). Rows are visited in the rough model's Morton order, blocks of
+/// rows are culled by bounding sphere, single points by frustum, facing and specification before any ray, and
+/// the surviving pairs' two occlusion rays are streamed through Embree. Deterministic for any thread count.
+MeasurabilityMatrix build_measurability(const RoughModel& rough, const OcclusionScene& scene, const SensorModel& sensor,
+                                        const ModelSpec& spec, const std::vector<Viewpoint>& candidates,
+                                        const MatrixSettings& settings = {}, MatrixStats* stats = nullptr,
+                                        const std::atomic<int>* cancel = nullptr);
+
+/// The same element test with no culling at all: every pair is transformed and both rays cast whatever the
+/// analytic tests say. The thesis' O(s²v) reference; for benchmarks and cross-checks only.
+MeasurabilityMatrix build_measurability_naive(const RoughModel& rough, const OcclusionScene& scene,
+                                              const SensorModel& sensor, const ModelSpec& spec,
+                                              const std::vector<Viewpoint>& candidates, const MatrixSettings& settings = {},
+                                              MatrixStats* stats = nullptr);
+
+/// m_ij for a single pair (same test as the builders), for tests and diagnostics.
+bool measurable(const RoughModel& rough, const OcclusionScene& scene, const SensorModel& sensor, const ModelSpec& spec,
+                const Viewpoint& view, std::uint32_t row, const MatrixSettings& settings = {});
+
+}  // namespace scancell::planner

@@ -1,0 +1,223 @@
+#include "planner/core/rough_model.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <map>
+#include <numeric>
+#include <random>
+#include <sstream>
+
+#include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
+#include <OpenMesh/Tools/Decimater/DecimaterT.hh>
+#include <OpenMesh/Tools/Decimater/ModEdgeLengthT.hh>
+#include <OpenMesh/Tools/Decimater/ModNormalFlippingT.hh>
+#include <OpenMesh/Tools/Decimater/ModQuadricT.hh>
+
+#include "planner/errors.hpp"
+
+namespace scancell::planner {
+namespace {
+
+// Double-precision points: decimation by halfedge collapse then keeps surviving vertices bit-exact, which
+// the DECOUPLED generator relies on to map RM_v vertices back to RM_s rows.
+struct DoubleTraits : OpenMesh::DefaultTraits {
+  using Point = OpenMesh::Vec3d;
+  using Normal = OpenMesh::Vec3d;
+};
+using OMesh = OpenMesh::TriMesh_ArrayKernelT<DoubleTraits>;
+
+std::uint64_t spread_bits(std::uint64_t x) {  // 21 bits -> every third bit of 63
+  x &= 0x1fffff;
+  x = (x | x << 32) & 0x1f00000000ffffull;
+  x = (x | x << 16) & 0x1f0000ff0000ffull;
+  x = (x | x << 8) & 0x100f00f00f00f00full;
+  x = (x | x << 4) & 0x10c30c30c30c30c3ull;
+  x = (x | x << 2) & 0x1249249249249249ull;
+  return x;
+}
+
+void check_label_count(const std::vector<int>& labels, std::size_t vertices) {
+  if (!labels.empty() && labels.size() != vertices)
+    throw ConfigError("segments: " + std::to_string(labels.size()) + " labels for " + std::to_string(vertices) +
+                      " mesh vertices");
+}
+
+}  // namespace
+
+TriangleMesh decimate(const TriangleMesh& mesh, std::size_t target_vertices, std::size_t* faces_rejected) {
+  OMesh om;
+  std::vector<OMesh::VertexHandle> vh;
+  vh.reserve(mesh.vertices.size());
+  for (const auto& v : mesh.vertices) vh.push_back(om.add_vertex(OMesh::Point(v.x(), v.y(), v.z())));
+  std::size_t rejected = 0;
+  for (const auto& t : mesh.triangles) {
+    if (!om.add_face(vh[t[0]], vh[t[1]], vh[t[2]]).is_valid()) ++rejected;  // complex edge / non-manifold
+  }
+  if (faces_rejected) *faces_rejected = rejected;
+
+  om.request_face_normals();  // ModNormalFlipping compares face normals before and after each collapse
+  om.update_face_normals();
+  OpenMesh::Decimater::DecimaterT<OMesh> decimater(om);
+  OpenMesh::Decimater::ModQuadricT<OMesh>::Handle quadric;
+  decimater.add(quadric);
+  decimater.module(quadric).unset_max_err();
+  // A rough model stands in for a rough scan, which samples the surface roughly evenly. Pure quadric
+  // decimation turns flat regions into a few huge (and sometimes flipped) triangles: one viewpoint position and
+  // one averaged normal for a region larger than the sensor footprint. So no collapse may flip a face or turn
+  // one by more than 60°, and no edge longer than twice the even spacing for the target count may collapse.
+  OpenMesh::Decimater::ModNormalFlippingT<OMesh>::Handle flipping;
+  decimater.add(flipping);
+  decimater.module(flipping).set_max_normal_deviation(60.0);
+  double area = 0.0;
+  for (const auto& t : mesh.triangles) area += triangle_area(mesh, t);
+  const double even_edge = std::sqrt(2.0 * area / (std::sqrt(3.0) * std::max<std::size_t>(target_vertices, 1)));
+  OpenMesh::Decimater::ModEdgeLengthT<OMesh>::Handle edge_length;
+  decimater.add(edge_length);
+  decimater.module(edge_length).set_edge_length(2.0 * even_edge);
+  if (!decimater.initialize()) throw MeshError("decimation: OpenMesh decimater failed to initialise");
+  decimater.decimate_to(target_vertices);
+  om.garbage_collection();
+
+  TriangleMesh out;
+  out.vertices.reserve(om.n_vertices());
+  for (auto v : om.vertices()) {
+    const auto& p = om.point(v);
+    out.vertices.emplace_back(p[0], p[1], p[2]);
+  }
+  for (auto f : om.faces()) {
+    Triangle t;
+    int k = 0;
+    for (auto v : om.fv_range(f)) t[k++] = static_cast<std::uint32_t>(v.idx());
+    out.triangles.push_back(t);
+  }
+  validate_mesh(out, "decimated mesh");
+  return out;
+}
+
+std::vector<Eigen::Vector3d> area_weighted_normals(const TriangleMesh& mesh) {
+  std::vector<Eigen::Vector3d> n(mesh.vertices.size(), Eigen::Vector3d::Zero());
+  for (const auto& t : mesh.triangles) {
+    const Eigen::Vector3d& a = mesh.vertices[t[0]];
+    const Eigen::Vector3d fn = (mesh.vertices[t[1]] - a).cross(mesh.vertices[t[2]] - a);
+    for (auto i : t) n[i] += fn;
+  }
+  for (auto& v : n) {
+    const double len = v.norm();
+    // A vertex whose face normals cancel (a knife edge) has no defined normal; keep zero so that no
+    // viewpoint counts it as facing, rather than inventing a direction.
+    v = len > 0.0 ? Eigen::Vector3d(v / len) : Eigen::Vector3d::Zero();
+  }
+  return n;
+}
+
+RoughModel make_rough_model(const TriangleMesh& mesh, const std::vector<int>& labels, const std::vector<std::uint8_t>& hypothetical) {
+  check_label_count(labels, mesh.vertices.size());
+  const std::size_t n = mesh.vertices.size();
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (const auto& v : mesh.vertices) {
+    lo = lo.cwiseMin(v);
+    hi = hi.cwiseMax(v);
+  }
+  const Eigen::Vector3d ext = (hi - lo).cwiseMax(1e-12);
+  std::vector<std::uint64_t> code(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3d q = ((mesh.vertices[i] - lo).cwiseQuotient(ext) * 2097151.0).cwiseMax(0.0);
+    code[i] = spread_bits(static_cast<std::uint64_t>(q.x())) | spread_bits(static_cast<std::uint64_t>(q.y())) << 1 |
+              spread_bits(static_cast<std::uint64_t>(q.z())) << 2;
+  }
+  std::vector<std::uint32_t> order(n);
+  std::iota(order.begin(), order.end(), 0u);
+  std::stable_sort(order.begin(), order.end(), [&](auto a, auto b) { return code[a] < code[b]; });
+  std::vector<std::uint32_t> rank(n);
+  for (std::size_t i = 0; i < n; ++i) rank[order[i]] = static_cast<std::uint32_t>(i);
+
+  RoughModel rm;
+  rm.points.resize(n);
+  for (std::size_t i = 0; i < n; ++i) rm.points[i] = mesh.vertices[order[i]];
+  if (!labels.empty()) {
+    rm.segment.resize(n);
+    for (std::size_t i = 0; i < n; ++i) rm.segment[i] = labels[order[i]];
+  }
+  if (!hypothetical.empty()) {
+    if (hypothetical.size() != n)
+      throw ConfigError("rough model: " + std::to_string(hypothetical.size()) + " hypothetical flags for " + std::to_string(n) + " vertices");
+    rm.hypothetical.resize(n);
+    for (std::size_t i = 0; i < n; ++i) rm.hypothetical[i] = hypothetical[order[i]];
+  }
+  rm.triangles = mesh.triangles;
+  for (auto& t : rm.triangles)
+    for (auto& i : t) i = rank[i];
+  const TriangleMesh sorted{rm.points, rm.triangles};
+  rm.normals = area_weighted_normals(sorted);
+  rm.area_mm2.assign(n, 0.0);
+  double edge_sum = 0.0;
+  for (const auto& t : rm.triangles) {
+    const double a = triangle_area(sorted, t);
+    rm.total_area_mm2 += a;
+    for (auto i : t) rm.area_mm2[i] += a / 3.0;
+    for (int k = 0; k < 3; ++k) edge_sum += (rm.points[t[k]] - rm.points[t[(k + 1) % 3]]).norm();
+  }
+  rm.mean_edge_mm = rm.triangles.empty() ? 0.0 : edge_sum / (3.0 * rm.triangles.size());
+  return rm;
+}
+
+namespace {
+
+/// Per-vertex values of `fine` for the vertices of `coarse` found at the same position (`missing` if none).
+template <class T>
+std::vector<T> carry_by_position(const TriangleMesh& fine, const TriangleMesh& coarse, const std::vector<T>& values, T missing) {
+  std::map<std::array<double, 3>, T> at;
+  for (std::size_t i = 0; i < fine.vertices.size(); ++i) at[{fine.vertices[i].x(), fine.vertices[i].y(), fine.vertices[i].z()}] = values[i];
+  std::vector<T> kept(coarse.vertices.size(), missing);
+  for (std::size_t i = 0; i < coarse.vertices.size(); ++i) {
+    const auto it = at.find({coarse.vertices[i].x(), coarse.vertices[i].y(), coarse.vertices[i].z()});
+    if (it != at.end()) kept[i] = it->second;
+  }
+  return kept;
+}
+
+}  // namespace
+
+RoughModel build_rough_model(TriangleMesh mesh, const RoughModelOptions& options, RoughModelReport* report) {
+  RoughModelReport r;
+  r.input_vertices = mesh.vertices.size();
+  std::vector<int> labels = options.vertex_labels;
+  std::vector<std::uint8_t> hypothetical = options.vertex_hypothetical;
+  if (!hypothetical.empty() && hypothetical.size() != mesh.vertices.size())
+    throw ConfigError("rough model: " + std::to_string(hypothetical.size()) + " hypothetical flags for " +
+                      std::to_string(mesh.vertices.size()) + " vertices");
+  if (options.target_vertices && options.rho_rel)
+    throw ConfigError("rough model: give either a target vertex count or rho_rel, not both");
+  check_label_count(labels, mesh.vertices.size());
+  std::optional<std::size_t> target = options.target_vertices;
+  if (options.rho_rel) {
+    if (!(*options.rho_rel <= 0.0)) throw ConfigError("rough model: rho_rel must be <= 0 (a rough model is sparser)");
+    target = static_cast<std::size_t>(std::llround(mesh.vertices.size() * std::exp2(*options.rho_rel)));
+  }
+  if (target) {
+    if (*target < 4) throw ConfigError("rough model: target vertex count must be at least 4");
+    if (*target < mesh.vertices.size()) {
+      TriangleMesh coarse = decimate(mesh, *target, &r.faces_rejected_by_decimator);
+      // Surviving vertices are bit-exact copies of input vertices: carry their labels and flags across.
+      if (!labels.empty()) labels = carry_by_position(mesh, coarse, labels, -1);
+      if (!hypothetical.empty()) hypothetical = carry_by_position(mesh, coarse, hypothetical, std::uint8_t{0});
+      mesh = std::move(coarse);
+      r.decimated = true;
+    }
+  }
+  if (options.normal_noise_mm < 0.0 || !std::isfinite(options.normal_noise_mm))
+    throw ConfigError("rough model: normal noise must be finite and >= 0 mm");
+  if (options.normal_noise_mm > 0.0) {
+    // Thesis 5.4: rough-model sampling error as Gaussian displacement along the local normal.
+    const auto n = area_weighted_normals(mesh);
+    std::mt19937_64 rng(options.seed);
+    std::normal_distribution<double> gauss(0.0, options.normal_noise_mm);
+    for (std::size_t i = 0; i < mesh.vertices.size(); ++i) mesh.vertices[i] += gauss(rng) * n[i];
+  }
+  r.output_vertices = mesh.vertices.size();
+  if (report) *report = r;
+  return make_rough_model(mesh, labels, hypothetical);
+}
+
+}  // namespace scancell::planner

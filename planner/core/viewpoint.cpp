@@ -1,0 +1,441 @@
+#include "planner/core/viewpoint.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+
+#include "planner/errors.hpp"
+
+namespace scancell::planner {
+namespace {
+
+constexpr double kTwoPi = 2.0 * std::numbers::pi;
+
+Eigen::Vector3d twist_reference_x(const Eigen::Vector3d& zc) {
+  const Eigen::Vector3d u = std::abs(zc.z()) < 0.9 ? Eigen::Vector3d::UnitZ() : Eigen::Vector3d::UnitX();
+  return u.cross(zc).normalized();
+}
+
+/// Whether a camera position keeps the clearance from every rough-model point.
+bool keeps_clearance(const RoughModel& rough, const Eigen::Vector3d& pos, double clearance_mm) {
+  for (const auto& q : rough.points)
+    if ((q - pos).squaredNorm() < clearance_mm * clearance_mm) return false;
+  return true;
+}
+
+/// The bisector-tilted twin of a view aimed at `target`: turned about camera x by `tilt` so the target's
+/// normal bisects the laser and receiver rays, at the same stand-off from the target.
+Viewpoint bisector_twin(const Viewpoint& v, const Eigen::Vector3d& target, double standoff, double tilt) {
+  const Eigen::Matrix3d rt = camera_rotation(v.axis, v.twist_rad, tilt);
+  Viewpoint t = v;
+  t.axis = -rt.col(2);
+  t.twist_rad = twist_towards(t.axis, rt.col(1));
+  t.position = target + standoff * rt.col(2);
+  t.tilt_rad = tilt;
+  return t;
+}
+
+/// What the neighbourhood of a targeted point tells the VARIABLE rules.
+struct Patch {
+  double rise_mm = 0.0;                            // R_a: how far patch points stand towards the camera
+  Eigen::Vector3d plane_normal = Eigen::Vector3d::Zero();
+  double nearest_mm = std::numeric_limits<double>::infinity();  // from a camera position to any point
+};
+
+}  // namespace
+
+std::vector<std::uint32_t> farthest_point_sample(const RoughModel& rough, std::size_t count, double normal_weight_mm) {
+  const std::size_t n = rough.size();
+  if (count >= n) {
+    std::vector<std::uint32_t> all(n);
+    for (std::uint32_t i = 0; i < n; ++i) all[i] = i;
+    return all;
+  }
+  std::vector<std::uint32_t> picked;
+  picked.reserve(count);
+  std::vector<double> d2(n, std::numeric_limits<double>::infinity());
+  const double w2 = normal_weight_mm * normal_weight_mm;
+  std::uint32_t next = 0;  // start from row 0: deterministic
+  struct Best {
+    double d2;
+    std::uint32_t row;
+  };
+  while (picked.size() < count) {
+    picked.push_back(next);
+    const Eigen::Vector3d p = rough.points[next], nn = rough.normals[next];
+    const Best best = tbb::parallel_reduce(
+        tbb::blocked_range<std::uint32_t>(0, static_cast<std::uint32_t>(n), 4096), Best{-1.0, 0},
+        [&](const auto& r, Best b) {
+          for (std::uint32_t i = r.begin(); i != r.end(); ++i) {
+            const double d = (rough.points[i] - p).squaredNorm() + w2 * (rough.normals[i] - nn).squaredNorm();
+            if (d < d2[i]) d2[i] = d;
+            if (d2[i] > b.d2) b = {d2[i], i};
+          }
+          return b;
+        },
+        [](const Best& a, const Best& b) { return (a.d2 > b.d2 || (a.d2 == b.d2 && a.row < b.row)) ? a : b; });
+    if (best.d2 <= 0.0) break;  // only duplicates left
+    next = best.row;
+  }
+  return picked;
+}
+
+Eigen::Matrix3d camera_rotation(const Eigen::Vector3d& axis, double twist_rad) {
+  const Eigen::Vector3d zc = -axis.normalized();
+  const Eigen::Vector3d x0 = twist_reference_x(zc);
+  const Eigen::Vector3d y0 = zc.cross(x0);
+  const Eigen::Vector3d xc = std::cos(twist_rad) * x0 + std::sin(twist_rad) * y0;
+  Eigen::Matrix3d r;
+  r.col(0) = xc;
+  r.col(1) = zc.cross(xc);
+  r.col(2) = zc;
+  return r;
+}
+
+Eigen::Matrix3d camera_rotation(const Eigen::Vector3d& axis, double twist_rad, double tilt_rad) {
+  Eigen::Matrix3d r = camera_rotation(axis, twist_rad);
+  if (tilt_rad == 0.0) return r;
+  const Eigen::Vector3d y0 = r.col(1), z0 = r.col(2);
+  r.col(2) = std::cos(tilt_rad) * z0 - std::sin(tilt_rad) * y0;
+  r.col(1) = std::sin(tilt_rad) * z0 + std::cos(tilt_rad) * y0;
+  return r;
+}
+
+double twist_towards(const Eigen::Vector3d& axis, const Eigen::Vector3d& dir) {
+  const Eigen::Vector3d zc = -axis.normalized();
+  const Eigen::Vector3d perp = dir - dir.dot(zc) * zc;
+  if (perp.norm() < 1e-9) return 0.0;
+  const Eigen::Vector3d yc = perp.normalized();
+  const Eigen::Vector3d xc = yc.cross(zc);
+  const Eigen::Vector3d x0 = twist_reference_x(zc);
+  const Eigen::Vector3d y0 = zc.cross(x0);
+  double t = std::atan2(xc.dot(y0), xc.dot(x0));
+  return t < 0.0 ? t + kTwoPi : t;
+}
+
+Viewpoint viewpoint_from_pose(const Eigen::Matrix3d& r, const Eigen::Vector3d& position, double scan_length_mm) {
+  Viewpoint v;
+  const Eigen::Vector3d zc = r.col(2).normalized();
+  v.axis = -zc;
+  const Eigen::Vector3d x0 = twist_reference_x(zc);
+  const Eigen::Vector3d y0 = zc.cross(x0);
+  v.twist_rad = std::atan2(r.col(0).dot(y0), r.col(0).dot(x0));
+  v.position = position;
+  v.scan_length_mm = scan_length_mm;
+  return v;
+}
+
+Eigen::Matrix3d Viewpoint::rotation() const {
+  // `axis` and `twist_rad` describe the actual frame, tilted or not; tilt_rad only records how it was made.
+  return camera_rotation(axis, twist_rad);
+}
+
+Eigen::Matrix4d Viewpoint::transform() const {
+  Eigen::Matrix4d t = Eigen::Matrix4d::Identity();
+  t.topLeftCorner<3, 3>() = rotation();
+  t.topRightCorner<3, 1>() = position;
+  return t;
+}
+
+double design_scan_length_mm(const SensorModel& sensor, const ModelSpec& spec, double range_mm,
+                             double design_incidence_rad) {
+  if (sensor.kind != SensorKind::line_scan) return 0.0;
+  const double c = std::cos(design_incidence_rad);
+  const double dx = range_mm * sensor.fov_x_rad / (sensor.samples_x - 1) / c;
+  const double dy2 = 1.0 / spec.density_per_mm2 - dx * dx;
+  if (dy2 <= 0.0) return sensor.scan_length_min_mm;
+  const double length = std::sqrt(dy2) * c * (sensor.samples_y - 1);
+  return std::clamp(length, sensor.scan_length_min_mm, sensor.scan_length_max_mm);
+}
+
+std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const OcclusionScene& scene,
+                                           const SensorModel& sensor, const ModelSpec& spec,
+                                           const ViewpointSettings& st, GenerationReport* report) {
+  if (st.twist_levels < 1) throw ConfigError("viewpoints.twist_levels must be >= 1");
+  if (st.position_decimation < 1) throw ConfigError("viewpoints.position_decimation must be >= 1");
+  GenerationReport rep;
+
+  // Viewpoint positions: RM_v, a d_v-times sparser subset of the rough-model rows (DECOUPLED), or every row
+  // (VARIABLE). The thesis decimates RM_s again; quadric decimation leaves flat regions arbitrarily sampled
+  // (it may strip a plate's corners of every nearby position), so we take a farthest-point sample instead,
+  // in position and normal together: it spreads positions evenly, keeps extremities, samples curved regions
+  // more densely, and never lets the two sides of a thin wall share one position.
+  const bool decoupled = st.scheme == ViewpointScheme::decoupled;
+  const int d_t = decoupled ? st.twist_levels : 1;
+  const std::size_t n_positions =
+      decoupled ? std::max<std::size_t>(1, rough.size() / static_cast<std::size_t>(st.position_decimation)) : rough.size();
+  const double normal_weight_mm = sensor.optimal_standoff_mm * std::tan(0.5 * sensor.fov_x_rad);
+  std::vector<std::uint32_t> target_rows = farthest_point_sample(rough, n_positions, normal_weight_mm);
+  std::sort(target_rows.begin(), target_rows.end());  // candidate order follows the rows, not the sampling order
+  std::vector<Eigen::Vector3d> target_normals;
+  for (auto r : target_rows) target_normals.push_back(rough.normals[r]);
+  rep.positions = target_rows.size();
+
+  const double r_o = sensor.optimal_standoff_mm;
+  const double range_cap = std::min(sensor.range_max_mm, max_range_for_precision_mm(sensor, spec));
+  const double footprint_half_x = r_o * std::tan(0.5 * sensor.fov_x_rad);
+  const double base_scan = design_scan_length_mm(sensor, spec, r_o * st.standoff_factor, st.scan_length_design_incidence_rad);
+  const double half_y = sensor.kind == SensorKind::line_scan ? 0.5 * base_scan : r_o * std::tan(0.5 * sensor.fov_y_rad);
+  const double patch_radius = std::hypot(footprint_half_x, half_y);
+
+  std::vector<std::vector<Viewpoint>> per_position(target_rows.size());
+  std::vector<std::uint8_t> why(target_rows.size(), 0);  // 0 kept, 1 no normal, 2 inside, 3 clearance
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, target_rows.size(), 8), [&](const auto& range) {
+    for (std::size_t k = range.begin(); k != range.end(); ++k) {
+      const Eigen::Vector3d s = rough.points[target_rows[k]];
+      const Eigen::Vector3d n = target_normals[k];
+      if (n.squaredNorm() < 0.5) {
+        why[k] = 1;
+        continue;
+      }
+      // The local patch: rough points within the footprint cylinder around the normal that face the same
+      // side. Its rise towards the camera sets R_a; its plane sets the VARIABLE twist.
+      Patch patch;
+      Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+      Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+      double wsum = 0.0;
+      for (std::size_t i = 0; i < rough.size(); ++i) {
+        const Eigen::Vector3d d = rough.points[i] - s;
+        const double h = d.dot(n);
+        if (std::abs(h) > patch_radius) continue;
+        if ((d - h * n).squaredNorm() > patch_radius * patch_radius) continue;
+        if (rough.normals[i].dot(n) <= 0.0) continue;
+        patch.rise_mm = std::max(patch.rise_mm, h);
+        const double w = rough.area_mm2[i];
+        centroid += w * rough.points[i];
+        wsum += w;
+      }
+      if (wsum > 0.0) {
+        centroid /= wsum;
+        for (std::size_t i = 0; i < rough.size(); ++i) {
+          const Eigen::Vector3d d = rough.points[i] - s;
+          const double h = d.dot(n);
+          if (std::abs(h) > patch_radius || (d - h * n).squaredNorm() > patch_radius * patch_radius ||
+              rough.normals[i].dot(n) <= 0.0)
+            continue;
+          const Eigen::Vector3d c = rough.points[i] - centroid;
+          cov += rough.area_mm2[i] * c * c.transpose();
+        }
+        Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
+        patch.plane_normal = es.eigenvectors().col(0);
+        if (patch.plane_normal.dot(n) < 0.0) patch.plane_normal = -patch.plane_normal;
+      }
+      const double r_a = std::min(patch.rise_mm, st.standoff_adjust_max_mm);
+      const double standoff = std::min((r_o + r_a) * st.standoff_factor, range_cap);
+      const Eigen::Vector3d position = s + standoff * n;
+
+      // Collision avoidance zone: the camera must stand outside the object and clear of it.
+      auto obstruction = [&](const Eigen::Vector3d& pos, const Eigen::Vector3d& out_dir) -> std::uint8_t {
+        if (!keeps_clearance(rough, pos, st.clearance_mm)) return 3;
+        if (auto hit = scene.first_hit(pos, out_dir, 0.0, 1e7); hit && hit->triangle < rough.triangles.size()) {
+          // (Triangles past the rough model's are cell fixtures: leaving through one says nothing of the object.)
+          const Triangle& t = rough.triangles[hit->triangle];
+          const Eigen::Vector3d fn =
+              (rough.points[t[1]] - rough.points[t[0]]).cross(rough.points[t[2]] - rough.points[t[0]]);
+          if (fn.dot(out_dir) > 0.0) return 2;  // leaving through a surface: we were inside
+        }
+        return 0;
+      };
+      auto clear_of_object = [&](const Eigen::Vector3d& pos) { return obstruction(pos, (pos - s).normalized()) == 0; };
+      if (const std::uint8_t o = obstruction(position, n)) {
+        why[k] = o;
+        continue;
+      }
+      const double scan = design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad);
+      // VARIABLE twist: put the receiver (camera +y) as far as possible from the patch plane.
+      const double base_twist = twist_towards(-n, patch.plane_normal);
+      const double tilt = 0.5 * std::atan2(sensor.baseline_mm, standoff);  // half the triangulation angle
+      for (int level = 0; level < d_t; ++level) {
+        Viewpoint v;
+        v.position = position;
+        v.axis = -n;
+        v.twist_rad = std::fmod(base_twist + kTwoPi * level / d_t, kTwoPi);
+        v.standoff_mm = standoff;
+        v.scan_length_mm = scan;
+        v.target_row = static_cast<std::int32_t>(target_rows[k]);
+        v.twist_level = level;
+        per_position[k].push_back(v);
+        if (st.bisector_tilt) {
+          const Viewpoint t = bisector_twin(v, s, standoff, tilt);
+          if (clear_of_object(t.position)) per_position[k].push_back(t);
+        }
+      }
+    }
+  });
+  std::vector<Viewpoint> out;
+  for (std::size_t k = 0; k < per_position.size(); ++k) {
+    rep.dropped_no_normal += why[k] == 1;
+    rep.dropped_inside += why[k] == 2;
+    rep.dropped_clearance += why[k] == 3;
+    out.insert(out.end(), per_position[k].begin(), per_position[k].end());
+  }
+  rep.candidates = out.size();
+  if (report) *report = rep;
+  return out;
+}
+
+std::vector<Viewpoint> open_direction_viewpoints(const RoughModel& rough, const OcclusionScene& scene,
+                                                 const SensorModel& sensor, const ModelSpec& spec,
+                                                 const ViewpointSettings& st, const std::vector<std::uint32_t>& rows,
+                                                 std::size_t max_rows, std::size_t* targeted_rows) {
+  if (rows.empty() || max_rows == 0) {
+    if (targeted_rows) *targeted_rows = 0;
+    return {};
+  }
+  // Spread the targets: farthest-point order over the given rows (position and normal, as for RM_v).
+  std::vector<std::uint32_t> targets;
+  {
+    const double w2 = std::pow(sensor.optimal_standoff_mm * std::tan(0.5 * sensor.fov_x_rad), 2);
+    // Targets closer than a quarter of the footprint width to one another add nothing a neighbour's views
+    // do not: stop there, so a cluster of unmeasurable rows (a hole) gets a few targets, not one per row.
+    const double min_spacing2 = std::pow(0.5 * sensor.optimal_standoff_mm * std::tan(0.5 * sensor.fov_x_rad), 2);
+    std::vector<double> d2(rows.size(), std::numeric_limits<double>::infinity());
+    std::size_t next = 0;
+    while (targets.size() < std::min(max_rows, rows.size())) {
+      targets.push_back(rows[next]);
+      const Eigen::Vector3d p = rough.points[rows[next]], nn = rough.normals[rows[next]];
+      double best = -1.0;
+      for (std::size_t i = 0; i < rows.size(); ++i) {
+        d2[i] = std::min(d2[i], (rough.points[rows[i]] - p).squaredNorm() + w2 * (rough.normals[rows[i]] - nn).squaredNorm());
+        if (d2[i] > best) best = d2[i], next = i;
+      }
+      if (best < min_spacing2) break;
+    }
+    std::sort(targets.begin(), targets.end());
+  }
+  if (targeted_rows) *targeted_rows = targets.size();
+
+  const double r_near = sensor.optimal_standoff_mm * st.standoff_factor;
+  // Not all the way to the precision limit: views there comply only at normal incidence and verify poorly.
+  const double r_far = std::max(r_near, std::min(sensor.range_max_mm, max_range_for_precision_mm(sensor, spec)) * 0.8);
+  const int levels = std::max(1, st.open_direction_standoffs);
+  // Probe directions: a Fibonacci spiral on the cap within the stricter grazing limit of the normal.
+  const double cap = 0.9 * std::min(sensor.grazing_xz_rad, sensor.grazing_yz_rad);
+  constexpr int kProbes = 96;
+  std::vector<Eigen::Vector3d> local;  // around +Z
+  for (int i = 0; i < kProbes; ++i) {
+    const double cz = 1.0 - (1.0 - std::cos(cap)) * (i + 0.5) / kProbes;
+    const double sz = std::sqrt(std::max(0.0, 1.0 - cz * cz));
+    const double az = i * std::numbers::pi * (3.0 - std::sqrt(5.0));
+    local.emplace_back(sz * std::cos(az), sz * std::sin(az), cz);
+  }
+  const double eps = 0.01 * rough.mean_edge_mm + 1e-3;
+
+  std::vector<std::vector<Viewpoint>> per_row(targets.size());
+  tbb::parallel_for(std::size_t{0}, targets.size(), [&](std::size_t k) {
+    const Eigen::Vector3d p = rough.points[targets[k]], n = rough.normals[targets[k]];
+    if (n.squaredNorm() < 0.5) return;
+    const Eigen::Quaterniond to_n = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), n);
+    std::vector<Eigen::Vector3d> open;
+    for (const auto& l : local) {
+      const Eigen::Vector3d d = to_n * l;
+      if (!scene.first_hit(p + eps * n, d, 0.0, r_far)) open.push_back(d);
+    }
+    if (open.empty()) return;
+    // Keep a spread subset: start nearest the normal, then farthest-first on the sphere.
+    std::vector<Eigen::Vector3d> keep;
+    std::size_t first = 0;
+    for (std::size_t i = 1; i < open.size(); ++i)
+      if (open[i].dot(n) > open[first].dot(n)) first = i;
+    keep.push_back(open[first]);
+    while (keep.size() < static_cast<std::size_t>(std::max(1, st.open_directions_per_row)) && keep.size() < open.size()) {
+      std::size_t best = 0;
+      double best_d = -1.0;
+      for (std::size_t i = 0; i < open.size(); ++i) {
+        double nearest = 4.0;
+        for (const auto& q : keep) nearest = std::min(nearest, (open[i] - q).squaredNorm());
+        if (nearest > best_d) best_d = nearest, best = i;
+      }
+      if (best_d <= 1e-12) break;
+      keep.push_back(open[best]);
+    }
+    for (const auto& d : keep)
+      for (int s = 0; s < levels; ++s) {
+        const double standoff = levels == 1 ? r_near : r_near + (r_far - r_near) * s / (levels - 1);
+        const Eigen::Vector3d position = p + standoff * d;
+        if (!keeps_clearance(rough, position, st.clearance_mm)) continue;
+        const double scan = design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad);
+        const double tilt = 0.5 * std::atan2(sensor.baseline_mm, standoff);
+        for (int level = 0; level < st.twist_levels; ++level) {
+          Viewpoint v;
+          v.position = position;
+          v.axis = -d;
+          v.twist_rad = kTwoPi * level / st.twist_levels;
+          v.standoff_mm = standoff;
+          v.scan_length_mm = scan;
+          v.target_row = static_cast<std::int32_t>(targets[k]);
+          v.twist_level = level;
+          per_row[k].push_back(v);
+          if (st.bisector_tilt) {
+            // Laser and receiver rays straddling the open direction: both fit a narrow opening.
+            const Viewpoint t = bisector_twin(v, p, standoff, tilt);
+            if (keeps_clearance(rough, t.position, st.clearance_mm)) per_row[k].push_back(t);
+          }
+        }
+      }
+  });
+  std::vector<Viewpoint> out;
+  for (auto& v : per_row) out.insert(out.end(), v.begin(), v.end());
+  return out;
+}
+
+std::vector<Viewpoint> single_best_views(const RoughModel& rough, const std::vector<std::uint32_t>& rows,
+                                         const SensorModel& sensor, const ModelSpec& spec, int twist_levels,
+                                         double standoff_factor) {
+  if (rows.empty()) return {};
+  if (twist_levels < 1) throw ConfigError("single best view: twist_levels must be >= 1");
+  Eigen::Vector3d mean_n = Eigen::Vector3d::Zero(), centroid = Eigen::Vector3d::Zero();
+  double area = 0.0;
+  for (auto r : rows) {
+    mean_n += rough.area_mm2[r] * rough.normals[r];
+    centroid += rough.area_mm2[r] * rough.points[r];
+    area += rough.area_mm2[r];
+  }
+  if (mean_n.norm() == 0.0 || area == 0.0) return {};
+  mean_n.normalize();
+  centroid /= area;
+  // Centre vertex: the segment row nearest the area centroid.
+  std::uint32_t centre = rows.front();
+  for (auto r : rows)
+    if ((rough.points[r] - centroid).squaredNorm() < (rough.points[centre] - centroid).squaredNorm()) centre = r;
+  const Eigen::Vector3d s = rough.points[centre];
+  const Eigen::Vector3d axis = -mean_n;
+  std::vector<Viewpoint> out;
+  for (int level = 0; level < twist_levels; ++level) {
+    const double twist = kTwoPi * level / twist_levels;
+    const Eigen::Matrix3d r = camera_rotation(axis, twist);
+    // Extent of the segment in the camera frame at zero stand-off (camera at s).
+    double half_x = 0.0, half_y = 0.0, rise = 0.0;
+    for (auto i : rows) {
+      const Eigen::Vector3d p = r.transpose() * (rough.points[i] - s);
+      half_x = std::max(half_x, std::abs(p.x()));
+      half_y = std::max(half_y, std::abs(p.y()));
+      rise = std::max(rise, p.z());  // towards the camera
+    }
+    // Stand-off so the fan covers ±half_x at the nearest point, and R_min is respected.
+    const double fit = half_x / std::tan(0.5 * sensor.fov_x_rad) + rise;
+    const double standoff = std::max(sensor.optimal_standoff_mm + rise, fit) * standoff_factor;
+    Viewpoint v;
+    v.axis = axis;
+    v.twist_rad = twist;
+    v.position = s - standoff * axis;
+    v.standoff_mm = standoff;
+    v.scan_length_mm = std::clamp(2.0 * half_y, sensor.scan_length_min_mm, sensor.scan_length_max_mm);
+    if (sensor.kind == SensorKind::line_scan) {
+      // Never longer than the density spec allows at this range (normal incidence).
+      const double cap = design_scan_length_mm(sensor, spec, standoff, 0.0);
+      v.scan_length_mm = std::min(v.scan_length_mm, cap);
+    }
+    v.target_row = static_cast<std::int32_t>(centre);
+    v.twist_level = level;
+    out.push_back(v);
+  }
+  return out;
+}
+
+}  // namespace scancell::planner

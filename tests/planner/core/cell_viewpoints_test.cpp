@@ -1,0 +1,92 @@
+// Cell-native candidates (cell_viewpoints.hpp) on a box on the turntable cell's plate: every candidate is a
+// pose the axes reach with the scanner body clear; a top face is seen from the steepest tilt the axis has
+// (clamped, not dropped); the bisector pair straddles a wall's normal by half the triangulation angle.
+#include <cmath>
+#include <numbers>
+
+#include <gtest/gtest.h>
+
+#include "planner/kinematics/cell.hpp"
+#include "planner/core/cell_viewpoints.hpp"
+#include "planner/core/rough_model.hpp"
+#include "planner/geometry/scene.hpp"
+#include "test_meshes.hpp"
+
+namespace sp = scancell::planner;
+
+namespace {
+
+struct BoxOnPlate {
+  sp::CellModel cell = sp::load_cell(sp::testing::source_path("config/cells/turntable-lift-tilt.yaml"));
+  sp::SensorModel sensor = sp::testing::thesis_sensor();
+  sp::ModelSpec spec = sp::testing::thesis_spec();
+  sp::ViewpointSettings settings;
+  sp::RoughModel rough;
+  std::vector<sp::Viewpoint> views;
+  sp::CellGenerationReport report;
+  BoxOnPlate() {
+    sp::TriangleMesh box;
+    sp::testing::add_box(box, {-50, -50, 0}, {50, 50, 60}, 10);  // on the table top (z = 0)
+    rough = sp::make_rough_model(box);
+    const sp::OcclusionScene scene(sp::with_fixtures(rough.mesh(), cell));
+    settings.position_decimation = 2;
+    const auto seeds = sp::generate_viewpoints(rough, scene, sensor, spec, settings);
+    const sp::CollisionChecker checker(cell, rough.mesh());
+    views = sp::cell_viewpoints(rough, seeds, sensor, spec, settings, cell, checker, &report);
+  }
+  Eigen::Isometry3d pose(const sp::Viewpoint& v) const {
+    Eigen::Isometry3d p;
+    p.matrix() = v.transform();
+    return p;
+  }
+};
+
+}  // namespace
+
+TEST(CellViewpoints, EveryCandidateIsReachableClearAndHasTheCellsTwist) {
+  BoxOnPlate b;
+  ASSERT_GT(b.views.size(), 100u);
+  EXPECT_EQ(b.report.candidates, b.views.size());
+  const sp::CollisionChecker checker(b.cell, b.rough.mesh());
+  for (const auto& v : b.views) {
+    const auto ik = sp::inverse_kinematics(b.cell, b.pose(v), v.scan_length_mm);
+    ASSERT_TRUE(ik.ok) << ik.why;
+    EXPECT_FALSE(checker.collides(b.pose(v), v.scan_length_mm));
+    const Eigen::Vector3d y_table = (b.cell.object_on_table * b.pose(v)).linear().col(1);
+    EXPECT_NEAR(y_table.z(), 0.0, 1e-9);  // the baseline lies horizontal
+    // The stand-off is kept: the targeted point lies on the boresight at that distance.
+    const Eigen::Vector3d target = b.rough.points[static_cast<std::size_t>(v.target_row)];
+    EXPECT_NEAR((target - v.position).norm(), v.standoff_mm, 1e-9);
+    EXPECT_NEAR((target - v.position).normalized().dot(v.axis), 1.0, 1e-9);
+  }
+}
+
+TEST(CellViewpoints, ATopFaceIsSeenFromTheSteepestTiltNotDropped) {
+  BoxOnPlate b;
+  const double tilt_max = 1.40;  // config/cells/turntable-lift-tilt.yaml: tilt in [-1.40, 1.40] rad
+  std::size_t top = 0;
+  for (const auto& v : b.views) {
+    const auto r = static_cast<std::size_t>(v.target_row);
+    if (b.rough.normals[r].z() < 0.999999 || v.twist_level != 0) continue;
+    ++top;
+    // Looking down: the boresight's elevation is −tilt_max, not −90° (unreachable) and not dropped.
+    EXPECT_NEAR(std::asin(v.axis.z()), -tilt_max, 1e-9);
+  }
+  EXPECT_GE(top, 3u);
+  EXPECT_GE(b.report.clamped, top);
+}
+
+TEST(CellViewpoints, TheBisectorPairStraddlesAWallsNormalByHalfTheTriangulationAngle) {
+  BoxOnPlate b;
+  std::size_t pairs = 0;
+  for (const auto& v : b.views) {
+    const auto r = static_cast<std::size_t>(v.target_row);
+    if (std::abs(b.rough.normals[r].x()) < 0.999999 || (v.twist_level != 1 && v.twist_level != 2)) continue;
+    ++pairs;
+    // atan(b / R) / 2 with b = 180 mm and the view's own stand-off (at R = 144.84 mm: 25.59°).
+    const double half = 0.5 * std::atan2(180.0, v.standoff_mm);
+    EXPECT_NEAR(std::acos(v.axis.dot(-b.rough.normals[r])), half, 1e-9);
+    EXPECT_NEAR(v.axis.z(), 0.0, 1e-9);  // turned about the table axis only
+  }
+  EXPECT_GT(pairs, 5u);
+}

@@ -1,0 +1,95 @@
+// Set covering on small matrices whose optimal answers are known by hand.
+#include <gtest/gtest.h>
+
+#include "planner/core/cover.hpp"
+
+namespace scancell::planner {
+namespace {
+
+MeasurabilityMatrix matrix(std::uint32_t rows, const std::vector<std::vector<std::uint32_t>>& cols) {
+  MeasurabilityMatrix m;
+  m.n_rows = rows;
+  for (const auto& c : cols) m.columns.emplace_back(c, rows);
+  return m;
+}
+
+std::vector<double> ones(std::size_t n) { return std::vector<double>(n, 1.0); }
+
+TEST(Column, StoresTheSmallerOfListAndBitset) {
+  const MeasurabilityColumn sparse({3, 70, 900}, 1000);
+  EXPECT_FALSE(sparse.is_bitset());
+  std::vector<std::uint32_t> many;
+  for (std::uint32_t r = 0; r < 1000; r += 2) many.push_back(r);
+  const MeasurabilityColumn dense(many, 1000);
+  EXPECT_TRUE(dense.is_bitset());
+  EXPECT_EQ(dense.rows(), many);
+  EXPECT_TRUE(dense.contains(998));
+  EXPECT_FALSE(dense.contains(999));
+  EXPECT_TRUE(sparse.contains(70));
+  EXPECT_FALSE(sparse.contains(71));
+  EXPECT_LT(dense.memory_bytes(), many.size() * 4);
+}
+
+TEST(Greedy, PicksLargestGainFirstAndStopsWhenNothingIsGained) {
+  // Rows 0..5; row 5 no column measures.
+  const auto m = matrix(6, {{0, 1}, {0, 1, 2, 3}, {3, 4}, {4}});
+  CoverSettings st;
+  st.mode = CoverMode::greedy;
+  const CoverResult r = greedy_cover(m, ones(6), st);
+  EXPECT_EQ(r.views, (std::vector<std::uint32_t>{1, 2}));
+  EXPECT_EQ(r.unmeasurable_rows, (std::vector<std::uint32_t>{5}));
+  EXPECT_NEAR(r.cumulative_fraction.back(), 5.0 / 6.0, 1e-12);
+  EXPECT_NEAR(r.measurable_fraction, 5.0 / 6.0, 1e-12);
+  EXPECT_EQ(r.stop_reason, "no candidate adds coverage");
+}
+
+TEST(Greedy, AreaWeightsChangeTheChoice) {
+  const auto m = matrix(4, {{0, 1, 2}, {3}});
+  CoverSettings st;
+  st.mode = CoverMode::greedy;
+  st.coverage_goal = 0.5;
+  // By count column 0 wins; by area row 3 outweighs rows 0-2 together.
+  EXPECT_EQ(greedy_cover(m, ones(4), st).views.front(), 0u);
+  EXPECT_EQ(greedy_cover(m, {1, 1, 1, 10}, st).views.front(), 1u);
+}
+
+TEST(Greedy, TiesGoToTheLowerColumnIndex) {
+  const auto m = matrix(4, {{0, 1}, {2, 3}, {0, 1}});
+  CoverSettings st;
+  st.mode = CoverMode::greedy;
+  EXPECT_EQ(greedy_cover(m, ones(4), st).views, (std::vector<std::uint32_t>{0, 1}));
+}
+
+TEST(Constrained, EveryNewViewOverlapsAChosenView) {
+  // 10 rows. Column 0 = rows 0-4 (m_S = 5). Column 1 = rows 5-9 covers the rest but shares nothing with 0.
+  // Column 2 = rows 4-7 overlaps column 0 in one row (σ = 0.2) and column 3 = rows 7-9 overlaps column 2.
+  const auto m = matrix(10, {{0, 1, 2, 3, 4}, {5, 6, 7, 8, 9}, {4, 5, 6, 7}, {7, 8, 9}});
+  CoverSettings greedy;
+  greedy.mode = CoverMode::greedy;
+  const CoverResult g = greedy_cover(m, ones(10), greedy);
+  EXPECT_EQ(g.views, (std::vector<std::uint32_t>{0, 1}));
+  EXPECT_EQ(g.registration_components, 2u);  // disconnected: σ_01 = 0
+
+  CoverSettings con;
+  con.mode = CoverMode::constrained;
+  con.registration_threshold = 0.2;
+  const CoverResult c = greedy_cover(m, ones(10), con);
+  EXPECT_EQ(c.views, (std::vector<std::uint32_t>{0, 2, 1}));  // column 1 registers via column 2 (σ = 0.6)
+  EXPECT_EQ(c.registration_components, 1u);
+  EXPECT_DOUBLE_EQ(c.cumulative_fraction.back(), 1.0);
+  EXPECT_GT(c.blocked_by_registration, 0u);
+  ASSERT_FALSE(c.registration_edges.empty());
+  EXPECT_NEAR(viewpoint_correlation(m.columns[0], m.columns[2], 5), 0.2, 1e-12);
+}
+
+TEST(Constrained, StopsWhenTheRestCannotRegister) {
+  const auto m = matrix(6, {{0, 1, 2}, {3, 4, 5}});
+  CoverSettings con;
+  con.registration_threshold = 0.1;
+  const CoverResult c = greedy_cover(m, ones(6), con);
+  EXPECT_EQ(c.views.size(), 1u);
+  EXPECT_EQ(c.stop_reason, "remaining gain needs views that cannot register (t_r)");
+}
+
+}  // namespace
+}  // namespace scancell::planner

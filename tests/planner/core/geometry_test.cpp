@@ -1,0 +1,258 @@
+// Known geometries: what one viewpoint can and cannot measure, and what the whole planner does with them.
+#include <atomic>
+#include <numbers>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "planner/errors.hpp"
+#include "planner/core/measurability.hpp"
+#include "planner/plan.hpp"
+#include "test_meshes.hpp"
+
+namespace scancell::planner {
+namespace {
+
+std::uint32_t nearest_row(const RoughModel& rm, const Eigen::Vector3d& p) {
+  std::uint32_t best = 0;
+  for (std::uint32_t i = 0; i < rm.size(); ++i)
+    if ((rm.points[i] - p).squaredNorm() < (rm.points[best] - p).squaredNorm()) best = i;
+  return best;
+}
+
+/// A camera looking straight down (-z) from `position`, with its receiver (+y) towards `receiver_dir`.
+Viewpoint looking_down(const Eigen::Vector3d& position, const Eigen::Vector3d& receiver_dir, double scan_length) {
+  Viewpoint v;
+  v.position = position;
+  v.axis = -Eigen::Vector3d::UnitZ();
+  v.twist_rad = twist_towards(v.axis, receiver_dir);
+  v.standoff_mm = position.z();
+  v.scan_length_mm = scan_length;
+  return v;
+}
+
+PlannerSettings variable_settings() {
+  PlannerSettings s;
+  s.viewpoints.scheme = ViewpointScheme::variable;
+  return s;
+}
+
+TEST(Geometry, PatchSmallerThanFootprintNeedsOneView) {
+  const ViewPlan p = plan_views(testing::flat_patch(40.0, 2.0), testing::thesis_sensor(), testing::thesis_spec(),
+                                PlannerSettings{}, {});
+  ASSERT_EQ(p.views.size(), 1u);
+  EXPECT_DOUBLE_EQ(p.cover.cumulative_fraction.back(), 1.0);
+  EXPECT_TRUE(p.cover.unmeasurable_rows.empty());
+}
+
+TEST(Geometry, WallBetweenPointAndReceiverMakesItUnmeasurable) {
+  const SensorModel sensor = testing::thesis_sensor();
+  const ModelSpec spec = testing::thesis_spec();
+  const TriangleMesh floor = testing::flat_patch(100.0, 5.0);
+  // Camera 150 mm above the origin, receiver towards +y: the receiver ray from the origin rises to
+  // (0, 180, 150); it crosses y = 30 at z = 25. The laser ray goes straight up.
+  const Viewpoint v = looking_down({0, 0, 150}, Eigen::Vector3d::UnitY(), 100.0);
+  {
+    const RoughModel rm = make_rough_model(floor);
+    const OcclusionScene scene(rm.mesh());
+    EXPECT_TRUE(measurable(rm, scene, sensor, spec, v, nearest_row(rm, {0, 0, 0})));
+  }
+  TriangleMesh walled = floor;
+  testing::add_grid(walled, {-20, 30, 5}, Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitZ(), 9, 12, 5.0);  // z 5..60
+  const RoughModel rm = make_rough_model(walled);
+  const OcclusionScene scene(rm.mesh());
+  EXPECT_FALSE(measurable(rm, scene, sensor, spec, v, nearest_row(rm, {0, 0, 0})));
+  // The same wall does not shadow a point on the far side of it from the receiver's view... of the laser:
+  // a receiver towards -y sees the origin again.
+  EXPECT_TRUE(measurable(rm, scene, sensor, spec, looking_down({0, 0, 150}, -Eigen::Vector3d::UnitY(), 100.0),
+                         nearest_row(rm, {0, 0, 0})));
+}
+
+TEST(Geometry, DeepCavityFloorCornersDependOnTwist) {
+  // D/W = 1: 60 mm wide, 60 mm deep. From 250 mm above the floor, the receiver 180 mm off along y sees the
+  // floor only within 60 - 180·60/250 = 16.8 mm of the wall on the receiver's far side.
+  const SensorModel sensor = testing::thesis_sensor();
+  const ModelSpec spec = testing::thesis_spec();
+  const RoughModel rm = make_rough_model(testing::square_cavity(60.0, 60.0, 90.0, 3.0));
+  const OcclusionScene scene(rm.mesh());
+  const std::uint32_t low = nearest_row(rm, {-27, -27, -60}), high = nearest_row(rm, {27, 27, -60});
+  ASSERT_NEAR((rm.points[low] - Eigen::Vector3d(-27, -27, -60)).norm(), 0.0, 1e-9);
+  ASSERT_NEAR((rm.points[high] - Eigen::Vector3d(27, 27, -60)).norm(), 0.0, 1e-9);
+  const Viewpoint plus_y = looking_down({0, 0, 190}, Eigen::Vector3d::UnitY(), 100.0);
+  const Viewpoint minus_y = looking_down({0, 0, 190}, -Eigen::Vector3d::UnitY(), 100.0);
+  EXPECT_TRUE(measurable(rm, scene, sensor, spec, plus_y, low));
+  EXPECT_FALSE(measurable(rm, scene, sensor, spec, plus_y, high));
+  EXPECT_TRUE(measurable(rm, scene, sensor, spec, minus_y, high));
+  EXPECT_FALSE(measurable(rm, scene, sensor, spec, minus_y, low));
+  // The laser alone sees both corners: what fails is the receiver's line of sight, not the frustum.
+  EXPECT_TRUE(test_point(sensor, spec, 100.0, plus_y.rotation().transpose() * (rm.points[high] - plus_y.position),
+                         plus_y.rotation().transpose() * rm.normals[high]).compliant);
+}
+
+TEST(Geometry, DeepCavityIsCoveredByThePlanner) {
+  // With bisecting views every floor row is measurable by some candidate, and plain greedy measures all
+  // that is measurable.
+  PlannerSettings greedy;
+  greedy.cover.mode = CoverMode::greedy;
+  const ViewPlan p = plan_views(testing::square_cavity(60.0, 60.0, 90.0, 3.0), testing::thesis_sensor(),
+                                testing::thesis_spec(), greedy, {});
+  for (auto r : p.cover.unmeasurable_rows) EXPECT_GT(p.rough.points[r].z(), -60.0 + 1e-9) << "floor row unmeasurable";
+  EXPECT_NEAR(p.cover.cumulative_fraction.back(), p.cover.measurable_fraction, 1e-12);
+  EXPECT_GE(p.views.size(), 2u);
+  // Without them (the thesis' optimal scanning zone) the middle of the floor is out of reach of the receiver.
+  greedy.viewpoints.bisector_tilt = false;
+  greedy.viewpoints.open_direction_views = false;
+  const ViewPlan q = plan_views(testing::square_cavity(60.0, 60.0, 90.0, 3.0), testing::thesis_sensor(),
+                                testing::thesis_spec(), greedy, {});
+  auto centre_unmeasurable = [](const ViewPlan& v) {
+    bool out = false;
+    for (auto r : v.cover.unmeasurable_rows) out |= (v.rough.points[r] - Eigen::Vector3d(0, 0, -60)).norm() < 1e-9;
+    return out;
+  };
+  EXPECT_TRUE(centre_unmeasurable(q));
+  // Open-direction views alone rescue it: straight down the cavity from farther out, where the triangulation
+  // angle atan(b/R) is narrower, and the rows they were made for are reported.
+  greedy.viewpoints.open_direction_views = true;
+  const ViewPlan o = plan_views(testing::square_cavity(60.0, 60.0, 90.0, 3.0), testing::thesis_sensor(),
+                                testing::thesis_spec(), greedy, {});
+  EXPECT_FALSE(centre_unmeasurable(o));
+  EXPECT_GT(o.generation.rows_unmeasurable_before, 0u);
+  EXPECT_GT(o.generation.open_direction_rows, 0u);
+  EXPECT_LT(o.cover.unmeasurable_rows.size(), o.generation.rows_unmeasurable_before);
+}
+
+TEST(Geometry, RegistrationConstraintReportsWhatItCannotReach) {
+  // Floor-only views overlap the rim views too little for t_r = 0.3: constrained greedy must say so and keep
+  // its registration graph connected rather than add views that cannot register.
+  PlannerSettings st;
+  st.cover.registration_threshold = 0.3;
+  st.viewpoints.open_direction_views = false;  // the far views would bridge floor and rim
+  const ViewPlan p = plan_views(testing::square_cavity(60.0, 60.0, 90.0, 3.0), testing::thesis_sensor(),
+                                testing::thesis_spec(), st, {});
+  EXPECT_EQ(p.cover.registration_components, 1u);
+  EXPECT_LT(p.cover.cumulative_fraction.back(), p.cover.measurable_fraction - 0.01);
+  EXPECT_EQ(p.cover.stop_reason, "remaining gain needs views that cannot register (t_r)");
+  for (const auto& e : p.cover.registration_edges) EXPECT_GE(e.sigma, 0.3);
+}
+
+TEST(Geometry, PatchWithFootprintRatio2_5NeedsAtLeastThreeViews) {
+  // Sensor footprint at the stand-off 1.02·R_min: fan width 2·144.84·tan(13.5°) = 69.55 mm times the design
+  // scan length 140.45 mm = 9768 mm². A 156 mm square is 24336 mm², r_f = 2.49: at least ⌈r_f⌉ = 3 views.
+  const ViewPlan p = plan_views(testing::flat_patch(156.0, 3.0), testing::thesis_sensor(), testing::thesis_spec(),
+                                PlannerSettings{}, {});
+  EXPECT_GE(p.views.size(), 3u);
+  EXPECT_LE(p.views.size(), 9u);  // the thesis' greedy needed 7 on its r_f = 2.55 patch
+  EXPECT_DOUBLE_EQ(p.cover.cumulative_fraction.back(), 1.0);
+  EXPECT_NEAR(p.views.front().scan_length_mm, 140.448, 1e-3);
+}
+
+TEST(Geometry, CandidatesInsideOrTooCloseAreDropped) {
+  // Plate at z = 0 under a 20 mm slab (z 140..160): its optimal viewpoints (z = 144.84) fall inside the slab.
+  TriangleMesh m = testing::flat_patch(60.0, 5.0);
+  const std::size_t plate_vertices = m.vertices.size();
+  testing::add_box(m, {-100, -100, 140}, {100, 100, 160}, 10.0);
+  const RoughModel rm = make_rough_model(m);
+  const OcclusionScene scene(rm.mesh());
+  auto plate_candidates = [&](const std::vector<Viewpoint>& c) {
+    std::size_t n = 0;
+    for (const auto& v : c) n += rm.points[v.target_row].z() == 0.0;
+    return n;
+  };
+  ViewpointSettings st = variable_settings().viewpoints;
+  GenerationReport rep;
+  auto c = generate_viewpoints(rm, scene, testing::thesis_sensor(), testing::thesis_spec(), st, &rep);
+  EXPECT_EQ(plate_candidates(c), 0u);
+  EXPECT_GE(rep.dropped_clearance, plate_vertices);
+  st.clearance_mm = 0.0;  // now only the inside test can catch them
+  c = generate_viewpoints(rm, scene, testing::thesis_sensor(), testing::thesis_spec(), st, &rep);
+  EXPECT_EQ(plate_candidates(c), 0u);
+  EXPECT_GE(rep.dropped_inside, plate_vertices);
+}
+
+TEST(Geometry, CulledMatrixEqualsNaiveAllPairs) {
+  TriangleMesh m = load_mesh(testing::source_path("tests/data/mushroom.off"));
+  apply_scale(m, fit_scale(m, 200.0));
+  RoughModelOptions o;
+  o.target_vertices = 400;
+  const RoughModel rm = build_rough_model(m, o);
+  const OcclusionScene scene(rm.mesh());
+  const SensorModel sensor = testing::thesis_sensor();
+  const ModelSpec spec = testing::thesis_spec();
+  const auto cands = generate_viewpoints(rm, scene, sensor, spec, ViewpointSettings{});
+  ASSERT_GT(cands.size(), 500u);
+  MatrixStats fast_stats, naive_stats;
+  const auto fast = build_measurability(rm, scene, sensor, spec, cands, {}, &fast_stats);
+  const auto naive = build_measurability_naive(rm, scene, sensor, spec, cands, {}, &naive_stats);
+  ASSERT_EQ(fast.n_cols(), naive.n_cols());
+  for (std::size_t j = 0; j < fast.n_cols(); ++j) ASSERT_EQ(fast.columns[j].rows(), naive.columns[j].rows()) << "column " << j;
+  EXPECT_GT(fast.nonzeros(), 0u);
+  EXPECT_LT(fast_stats.rays_cast, naive_stats.rays_cast / 5);  // culling does its job
+  EXPECT_GT(fast_stats.pairs_block_culled, 0u);
+  // Single-pair evaluation agrees with the matrix.
+  for (std::size_t j = 0; j < fast.n_cols(); j += 97)
+    for (std::uint32_t i = 0; i < rm.size(); i += 7) EXPECT_EQ(measurable(rm, scene, sensor, spec, cands[j], i), fast.columns[j].contains(i));
+  // Issue 16: a cancel request stops the build (the daemon's abort waited minutes for planning); without one
+  // the flag changes nothing.
+  std::atomic<int> cancel{0};
+  EXPECT_EQ(build_measurability(rm, scene, sensor, spec, cands, {}, nullptr, &cancel).nonzeros(), fast.nonzeros());
+  cancel = 2;
+  try {
+    build_measurability(rm, scene, sensor, spec, cands, {}, nullptr, &cancel);
+    ADD_FAILURE() << "the matrix build ignored the cancel request";
+  } catch (const PlanCancelled& e) {
+    EXPECT_THAT(e.what(), ::testing::HasSubstr("while building the measurability matrix"));
+  }
+}
+
+TEST(Geometry, SingleBestViewSeesAWholeSmallSegment) {
+  const RoughModel rm = make_rough_model(testing::flat_patch(50.0, 2.5));
+  const OcclusionScene scene(rm.mesh());
+  std::vector<std::uint32_t> all(rm.size());
+  for (std::uint32_t i = 0; i < rm.size(); ++i) all[i] = i;
+  const auto views = single_best_views(rm, all, testing::thesis_sensor(), testing::thesis_spec(), 4);
+  ASSERT_EQ(views.size(), 4u);
+  const auto m = build_measurability(rm, scene, testing::thesis_sensor(), testing::thesis_spec(), views);
+  EXPECT_EQ(m.columns[0].count(), rm.size());
+}
+
+}  // namespace
+}  // namespace scancell::planner
+
+namespace scancell::planner {
+namespace {
+
+TEST(Geometry, SegmentsAddSingleBestViewsThatCoverAPatchInOneView) {
+  // Two separate 50 mm plates, labelled 0 and 1, each smaller than the footprint: with segments the cover
+  // may take one single-best view per plate.
+  TriangleMesh m = testing::flat_patch(50.0, 2.5);
+  const std::size_t first = m.vertices.size();
+  testing::add_grid(m, {200, -25, 0}, Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY(), 21, 21, 2.5);
+  RoughModelOptions o;
+  o.vertex_labels.assign(m.vertices.size(), 1);
+  std::fill(o.vertex_labels.begin(), o.vertex_labels.begin() + first, 0);
+  PlannerSettings st;
+  st.cover.mode = CoverMode::greedy;
+  const ViewPlan p = plan_views(m, testing::thesis_sensor(), testing::thesis_spec(), st, o);
+  EXPECT_EQ(p.segments, 2u);
+  EXPECT_EQ(p.generation.single_best_views, 8u);
+  EXPECT_EQ(p.views.size(), 2u);
+  EXPECT_DOUBLE_EQ(p.cover.cumulative_fraction.back(), 1.0);
+  // Labels must match the vertex count.
+  o.vertex_labels.pop_back();
+  EXPECT_THROW(plan_views(m, testing::thesis_sensor(), testing::thesis_spec(), st, o), ConfigError);
+}
+
+TEST(SensorModel, RandomAccessDensityUsesTheYFieldOfView) {
+  SensorModel s = testing::thesis_sensor();
+  s.kind = SensorKind::random_access;
+  s.fov_y_rad = s.fov_x_rad;
+  // Square raster: δy = δx = 142·Φ/255 = 0.262414 mm, ρ = 1 / (2 δx²) = 7.26099.
+  EXPECT_NEAR(predicted_density_per_mm2(s, {142.0, 0.0, 0.0, 0.0}, 0.0), 7.2609160, 1e-6);
+  // The receiver sits a baseline from a fixed laser at the origin, whatever the point's y.
+  const PointTest t = test_point(s, testing::thesis_spec(), 0.0, {0, 20, -150}, {0, 0, 1});
+  EXPECT_EQ(t.laser_y_mm, 0.0);
+  EXPECT_EQ(t.receiver_y_mm, 180.0);
+}
+
+}  // namespace
+}  // namespace scancell::planner
