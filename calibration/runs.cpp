@@ -77,6 +77,9 @@ std::vector<RayOutcome> rays_on_plane(const sp::RangeImage& img, const sp::Senso
                                       const Eigen::Vector3d& p_view, Inside inside) {
   std::vector<RayOutcome> out;
   for (int j = 0; j < img.rows; ++j) {
+    // A profile the sweep never fired returned nothing because it was not taken: not evidence of a ray that
+    // found no surface (under load the polled sweep loses profiles, and t_yz came out 16° low).
+    if (!img.acquired_rows.empty() && !img.acquired_rows[static_cast<std::size_t>(j)]) continue;
     const double y = -0.5 * img.pose.scan_length_mm + img.pose.scan_length_mm * j / (img.rows - 1);
     const Eigen::Vector3d laser(0.0, y, 0.0), receiver(0.0, y + s.baseline_mm, 0.0);
     for (int i = 0; i < img.columns; ++i) {

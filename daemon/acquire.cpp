@@ -102,6 +102,8 @@ Acquisition acquire_view(dr::Positioner& positioner, ScanHead& head, const sp::C
       img.samples[static_cast<std::size_t>(fired_rows[k]) * n_cols + i] = s;
     }
   }
+  img.acquired_rows.assign(static_cast<std::size_t>(n_rows), 0);
+  for (const int row : fired_rows) img.acquired_rows[static_cast<std::size_t>(row)] = 1;
   Acquisition out;
   out.lost_profiles = n_rows - static_cast<int>(fired_rows.size());
   out.image = std::move(img);

@@ -444,7 +444,8 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
   const JobRecord rec = journal_.job(id);
   j.progress.state = rec.state;
   if (finished(rec.state)) return rec.state;
-  if (rec.state == JobState::paused) return rec.state;  // paused before it started: resume queues it again
+  // Paused or faulted (before it started, or left so): only resume, which queues it again, makes it runnable.
+  if (rec.state == JobState::paused || rec.state == JobState::faulted) return rec.state;
   try {
     j.request = JobRequest::from_json(json::parse(rec.request_json));
     j.spec = j.request.spec.empty() ? models_.spec : sp::load_spec(j.request.spec);

@@ -1,5 +1,6 @@
 #include "daemon/journal.hpp"
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <fstream>
@@ -106,6 +107,53 @@ bool finished(JobState s) {
   return s == JobState::done || s == JobState::stalled || s == JobState::aborted || s == JobState::failed;
 }
 
+bool active(JobState s) {
+  return s == JobState::rough_scanning || s == JobState::planning || s == JobState::executing || s == JobState::verifying ||
+         s == JobState::replanning;
+}
+
+namespace {
+
+// The job state machine, all of it (LinuxCNC estop_latch style: states and every transition in one place).
+// An active state may go to any active state: the 3M loop goes round (executing, verifying, replanning,
+// executing), and a daemon restarted after kill -9 resumes a job in the state it died in.
+struct JobTransitions {
+  JobState from;
+  std::vector<JobState> to;
+};
+using S = JobState;
+const std::vector<S> kActive = {S::rough_scanning, S::planning, S::executing, S::verifying, S::replanning};
+std::vector<S> with_active(std::vector<S> more) {
+  more.insert(more.end(), kActive.begin(), kActive.end());
+  return more;
+}
+const std::vector<JobTransitions>& job_transitions() {
+  static const std::vector<JobTransitions> t = {
+      // queued: started (its first active state; a calibration run starts executing), or paused or aborted
+      // while waiting, or faulted or failed on its input before anything moved.
+      {S::queued, with_active({S::paused, S::aborted, S::faulted, S::failed})},
+      // active: round and round, then an ending; paused at a safe point; faulted by hardware or input.
+      {S::rough_scanning, with_active({S::paused, S::done, S::stalled, S::aborted, S::faulted, S::failed})},
+      {S::planning, with_active({S::paused, S::done, S::stalled, S::aborted, S::faulted, S::failed})},
+      {S::executing, with_active({S::paused, S::done, S::stalled, S::aborted, S::faulted, S::failed})},
+      {S::verifying, with_active({S::paused, S::done, S::stalled, S::aborted, S::faulted, S::failed})},
+      {S::replanning, with_active({S::paused, S::done, S::stalled, S::aborted, S::faulted, S::failed})},
+      // paused and faulted: resume queues the job again; abort ends it.
+      {S::paused, {S::queued, S::aborted}},
+      {S::faulted, {S::queued, S::aborted}},
+      // done, stalled, aborted, failed: final.
+  };
+  return t;
+}
+
+}  // namespace
+
+bool transition_allowed(JobState from, JobState to) {
+  for (const auto& t : job_transitions())
+    if (t.from == from) return std::find(t.to.begin(), t.to.end(), to) != t.to.end();
+  return false;
+}
+
 Journal::Journal(const std::filesystem::path& dir) : dir_(dir) {
   std::filesystem::create_directories(dir_ / "scans");
   // A crash between writing a temp file and renaming it leaves it behind; it is referenced by nothing.
@@ -163,6 +211,15 @@ std::int64_t Journal::create_job(const std::string& mesh, const std::string& req
 void Journal::set_state(std::int64_t job, JobState state, const std::string& cause) {
   std::lock_guard<std::recursive_mutex> lock(mu_);
   Transaction t(db_);
+  {
+    Stmt s(db_, "SELECT state FROM jobs WHERE id = ?");
+    s.bind(1, job);
+    if (!s.step()) throw JournalError("journal: no job " + std::to_string(job));
+    const JobState from = job_state_from(s.text(0));
+    if (!transition_allowed(from, state))
+      throw JournalError("journal: job " + std::to_string(job) + " cannot go from " + to_string(from) + " to " + to_string(state) +
+                         " (the job state machine, daemon/journal.cpp)");
+  }
   Stmt(db_, "UPDATE jobs SET state = ?, cause = ? WHERE id = ?").bind(1, std::string(to_string(state))).bind(2, cause).bind(3, job).step();
   if (sqlite3_changes(db_) != 1) throw JournalError("journal: no job " + std::to_string(job));
   Stmt(db_, "INSERT INTO events(job, text) VALUES (?, ?)").bind(1, job).bind(2, std::string(to_string(state)) + (cause.empty() ? "" : ": " + cause)).step();

@@ -16,11 +16,28 @@ struct sqlite3;
 
 namespace scancell::daemon {
 
-enum class JobState { queued, rough_scanning, planning, executing, verifying, replanning, paused, done, stalled, aborted, faulted,
-                      failed };
+/// A job's life. Every state and every allowed change is in `kJobTransitions` (journal.cpp), and
+/// Journal::set_state refuses any other change; docs/daemon.md draws the same table.
+enum class JobState {
+  queued,          // waiting for the cell; resume and a restart come back here or to the active state it had
+  rough_scanning,  // active: exploration views of a bounding-box job, fused into its rough model
+  planning,        // active: the first plan (3M matrix and cover)
+  executing,       // active: moving, sweeping, storing the views of the current round
+  verifying,       // active: measured coverage of the rough model after a round
+  replanning,      // active: a further round for the rows still open
+  paused,          // stopped at a safe point by request; resume queues it again, abort ends it
+  done,            // final: the specification is met
+  stalled,         // final: nothing more can be measured (named rows, rounds, gain), the rest reported
+  aborted,         // final: by request
+  faulted,         // a drive, scanner or input fault stopped it; resume (after the fault is cleared) queues it
+  failed           // final: a calibration run that could not produce a result
+};
 const char* to_string(JobState s);
 JobState job_state_from(const std::string& s);  // throws std::invalid_argument
 bool finished(JobState s);                     // done, stalled, aborted, failed
+bool active(JobState s);                       // rough_scanning, planning, executing, verifying, replanning
+/// Whether a job may go from `from` to `to` (the table in journal.cpp).
+bool transition_allowed(JobState from, JobState to);
 
 struct JobRecord {
   std::int64_t id = 0;

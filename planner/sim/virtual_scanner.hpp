@@ -43,6 +43,10 @@ struct RangeImage {
   int rows = 0;     // N_y
   ScanPose pose;
   std::vector<RangeSample> samples;  // row-major, j * columns + i
+  /// Line scan on the cell: 1 for each row whose profile was acquired, 0 for a profile the sweep passed
+  /// without firing (the position compare missed it). A lost row holds no samples and says nothing about
+  /// the surface. Empty: every row was acquired (the virtual scanner, a stored file).
+  std::vector<std::uint8_t> acquired_rows;
 
   const RangeSample& at(int i, int j) const { return samples[static_cast<std::size_t>(j) * columns + i]; }
   std::size_t valid_count() const;

@@ -54,8 +54,25 @@ TEST(Journal, StatesPlansScansAndEvents) {
     const auto ev = j.events(job);
     ASSERT_EQ(ev.size(), 5u);
     EXPECT_EQ(ev.back(), "faulted: lift: register 1 (status): timeout");
+    // The job state machine (journal.cpp): a faulted job goes on only through resume (queued); a finished
+    // one never moves again; each refusal names both states.
+    try {
+      j.set_state(job, dm::JobState::done);
+      ADD_FAILURE() << "faulted -> done accepted";
+    } catch (const dm::JournalError& e) {
+      EXPECT_NE(std::string(e.what()).find("cannot go from faulted to done"), std::string::npos) << e.what();
+    }
+    EXPECT_EQ(j.job(job).state, dm::JobState::faulted);  // unchanged, and no event written
+    EXPECT_EQ(j.events(job).size(), 5u);
+    j.set_state(job, dm::JobState::queued, "resumed");
+    j.set_state(job, dm::JobState::executing);
     j.set_state(job, dm::JobState::done);
     EXPECT_TRUE(j.unfinished_jobs().empty());
+    EXPECT_THROW(j.set_state(job, dm::JobState::executing), dm::JournalError);
+    EXPECT_THROW(j.set_state(job, dm::JobState::queued), dm::JournalError);
+    EXPECT_FALSE(dm::transition_allowed(dm::JobState::paused, dm::JobState::executing));  // resume queues first
+    EXPECT_TRUE(dm::transition_allowed(dm::JobState::executing, dm::JobState::verifying));
+    EXPECT_TRUE(dm::transition_allowed(dm::JobState::verifying, dm::JobState::executing));  // the next round
   }
   {
     // A damaged file is found by check().
