@@ -307,6 +307,10 @@ TEST_F(SimCell, RegistrationPutsSamplesWhereTheyReallyAreUnderPoseError) {
   t.seed = 5;
   truth = t;
   max_rounds = 1;
+  // At 400 mm/s a loaded build's polled sweep loses profiles (coverage fell from 0.85 to 0.66 beside the
+  // kill loop), and the measured/verified comparison below drifted past 1 % on the holes' edges; this test is
+  // about registration, so it sweeps at half speed.
+  scan_speed = 200.0;
   sp::TriangleMesh fine = sp::load_mesh(src("tests/data/mushroom.off"));
   sp::apply_scale(fine, sp::fit_scale(fine, 100.0));
   sp::write_off(fine, (dir / "fine.off").string());
