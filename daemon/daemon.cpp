@@ -88,13 +88,17 @@ Daemon::Daemon(DaemonConfig config) : config_(std::move(config)) {
   job_thread_ = std::thread([this] { job_loop(); });
 }
 
-Daemon::~Daemon() {
-  shutting_down_ = 1;
+void Daemon::stop_job_thread() {
+  shutting_down_ = 1;  // first: a submit's mesh read stops at once
   running_ = false;
   stop_ = static_cast<int>(StopRequest::shutdown);
   wake_.notify_all();
   events_cv_.notify_all();
   if (job_thread_.joinable()) job_thread_.join();
+}
+
+Daemon::~Daemon() {
+  stop_job_thread();
   control_.reset();
 }
 
@@ -440,12 +444,7 @@ int Daemon::run() {
   }
   std::cerr << "scancelld: stopping at the next safe point" << std::endl;
   notifier_.stopping("stopping: finishing the current move or profile, then parking");
-  shutting_down_ = 1;
-  running_ = false;
-  stop_ = static_cast<int>(StopRequest::shutdown);
-  wake_.notify_all();
-  events_cv_.notify_all();
-  if (job_thread_.joinable()) job_thread_.join();
+  stop_job_thread();
   try {
     park(*io_, config_.models.cell, config_.jobs.move_timeout);
   } catch (const std::exception& e) {

@@ -36,6 +36,8 @@ class Daemon {
 
  private:
   void job_loop();
+  /// Stops the running job at its next safe point and joins the job thread (shutdown and destruction).
+  void stop_job_thread();
   void report(const Progress& p);
   void publish_status();
   void publish_axes();

@@ -243,15 +243,9 @@ void validate_request(const JobRequest& r, const std::atomic<int>* cancel) {
   if (r.bbox_mm && !(r.bbox_mm->minCoeff() > 0.0 && r.bbox_mm->maxCoeff() < 1000.0))
     throw std::invalid_argument("submit: 'bbox_mm' sizes must be in (0, 1000) mm");
   if (!(r.fit_mm >= 0.0) || !std::isfinite(r.fit_mm)) throw std::invalid_argument("submit: 'fit_mm' must be > 0");
-  if (r.bbox_mm) {
-    if (!r.truth.empty()) load_object(r.truth, r.fit_mm, cancel);
-    if (!r.spec.empty()) sp::load_spec(r.spec);
-    if (!r.settings.empty()) sp::load_planner_settings(r.settings);
-    return;
-  }
-  if (r.rough_vertices && (*r.rough_vertices < 50 || *r.rough_vertices > 200000))
+  if (!r.bbox_mm && r.rough_vertices && (*r.rough_vertices < 50 || *r.rough_vertices > 200000))
     throw std::invalid_argument("submit: 'rough_vertices' must be in [50, 200000]");
-  load_object(r.mesh, r.fit_mm, cancel);
+  if (!r.mesh.empty()) load_object(r.mesh, r.fit_mm, cancel);
   if (!r.truth.empty()) load_object(r.truth, r.fit_mm, cancel);
   if (!r.spec.empty()) sp::load_spec(r.spec);
   if (!r.settings.empty()) sp::load_planner_settings(r.settings);

@@ -61,19 +61,17 @@ const char* to_string(DriverError::Kind k) {
 
 ModbusAxis::ModbusAxis(ModbusConfig config) : cfg_(std::move(config)) { connect(); }
 
-ModbusAxis::~ModbusAxis() {
-  if (ctx_) {
-    modbus_close(ctx_);
-    modbus_free(ctx_);
-  }
+ModbusAxis::~ModbusAxis() { close_link(); }
+
+void ModbusAxis::close_link() {
+  if (!ctx_) return;
+  modbus_close(ctx_);
+  modbus_free(ctx_);
+  ctx_ = nullptr;
 }
 
 void ModbusAxis::connect() {
-  if (ctx_) {
-    modbus_close(ctx_);
-    modbus_free(ctx_);
-    ctx_ = nullptr;
-  }
+  close_link();
   ctx_ = cfg_.transport == ModbusConfig::Transport::tcp
              ? modbus_new_tcp(cfg_.host.c_str(), cfg_.port)
              : modbus_new_rtu(cfg_.device.c_str(), cfg_.baud, cfg_.parity, 8, 1);
@@ -116,11 +114,7 @@ void ModbusAxis::give_way_to_halt(const std::string& where) {
 void ModbusAxis::reconnect(const std::string& where) {
   while (true) {
     if (reconnects_in_row_ >= cfg_.reconnect_attempts) {
-      if (ctx_) {  // the next transaction starts with a connect, not on the dead link
-        modbus_close(ctx_);
-        modbus_free(ctx_);
-        ctx_ = nullptr;
-      }
+      close_link();  // the next transaction starts with a connect, not on the dead link
       fail(DriverError::Kind::connection, where,
            "connection lost; " + std::to_string(reconnects_in_row_) +
                " reconnects in a row gave no working link (the peer accepts and drops it, or is gone; "
@@ -140,9 +134,7 @@ void ModbusAxis::reconnect(const std::string& where) {
 void ModbusAxis::resync(const std::string& where) {
   if (cfg_.transport == ModbusConfig::Transport::tcp) {
     // A fresh connection: whatever late replies the old one still carries are gone with it.
-    modbus_close(ctx_);
-    modbus_free(ctx_);
-    ctx_ = nullptr;
+    close_link();
     reconnect(where);
   } else {
     // One line: wait out what is still on its way, then drop it.

@@ -59,6 +59,7 @@ class ModbusAxis : public Axis {
 
  private:
   void connect();
+  void close_link();  // closes and frees the context (none afterwards)
   void reconnect(const std::string& where);
   void resync(const std::string& where);
   void pause(std::chrono::milliseconds d);

@@ -132,30 +132,28 @@ class Section {
 /// Configuration files are small; anything larger is not one (and is not read into memory).
 inline constexpr std::size_t kMaxConfigBytes = 4 * 1024 * 1024;
 
-inline Section open_root(const std::filesystem::path& file, YAML::Node& holder) {
-  // Read through read_regular_file: a FIFO or device named as a config is refused, never waited on.
-  const std::string text = read_regular_file(file, kMaxConfigBytes);
-  try {
-    holder = YAML::Load(text);
-  } catch (const YAML::DeepRecursion& e) {
-    throw ConfigError(file.string() + ": nested deeper than a configuration ever needs, at line " + std::to_string(e.mark.line + 1));
-  } catch (const YAML::Exception& e) {
-    throw ConfigError(file.string() + ": invalid YAML at line " + std::to_string(e.mark.line + 1) + ", column " +
-                      std::to_string(e.mark.column + 1) + ": " + e.msg);
-  }
-  if (!holder || holder.IsNull()) throw ConfigError(file.string() + ": file is empty");
-  return Section(holder, file.string(), "");
-}
-
-inline Section parse_root(const std::string& text, const std::string& where, YAML::Node& holder) {
+/// YAML text parsed into `holder`; every parser error becomes a ConfigError naming `where` and the line
+/// (`format` says what the text was meant to be), and nesting past yaml-cpp's depth guard is named as such.
+inline void load_yaml_text(const std::string& text, const std::string& where, const char* format, YAML::Node& holder) {
   try {
     holder = YAML::Load(text);
   } catch (const YAML::DeepRecursion& e) {
     throw ConfigError(where + ": nested deeper than a configuration ever needs, at line " + std::to_string(e.mark.line + 1));
   } catch (const YAML::Exception& e) {
-    throw ConfigError(where + ": invalid YAML/JSON at line " + std::to_string(e.mark.line + 1) + ", column " +
+    throw ConfigError(where + ": invalid " + format + " at line " + std::to_string(e.mark.line + 1) + ", column " +
                       std::to_string(e.mark.column + 1) + ": " + e.msg);
   }
+}
+
+inline Section open_root(const std::filesystem::path& file, YAML::Node& holder) {
+  // Read through read_regular_file: a FIFO or device named as a config is refused, never waited on.
+  load_yaml_text(read_regular_file(file, kMaxConfigBytes), file.string(), "YAML", holder);
+  if (!holder || holder.IsNull()) throw ConfigError(file.string() + ": file is empty");
+  return Section(holder, file.string(), "");
+}
+
+inline Section parse_root(const std::string& text, const std::string& where, YAML::Node& holder) {
+  load_yaml_text(text, where, "YAML/JSON", holder);
   if (!holder || holder.IsNull()) throw ConfigError(where + ": empty");
   return Section(holder, where, "");
 }
