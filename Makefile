@@ -37,7 +37,8 @@ test-asan: deps
 # (default 60), starting from the committed corpus and reproducers; new inputs land in build-fuzz/corpus/.
 FUZZ_BUILD   ?= build-fuzz
 FUZZ_SECONDS ?= 60
-fuzz: deps
+fuzz:
+	@bash scripts/deps.sh fuzz
 	@CC=clang CXX=clang++ $(CMAKE) -S . -B $(FUZZ_BUILD) -DCMAKE_BUILD_TYPE=Debug "-DCMAKE_CXX_FLAGS_DEBUG=-O1 -g" \
 	  -DSCANCELL_SANITIZE=ON -DSCANCELL_FUZZ=ON -DSCANCELL_BUILD_BENCH=OFF > $(FUZZ_BUILD).configure.log 2>&1 || (cat $(FUZZ_BUILD).configure.log; exit 1)
 	@$(CMAKE) --build $(FUZZ_BUILD) -j$(JOBS) --target fuzz_mesh fuzz_range_image fuzz_plan_file fuzz_config fuzz_control

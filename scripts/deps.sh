@@ -11,6 +11,8 @@ PKGS=(
   libmodbus-dev mbpoll libgpiod-dev libsqlite3-dev zlib1g-dev
   liblcm-dev liblcm-bin iproute2 libsystemd-dev libcli11-dev libnanoflann-dev
 )
+# `scripts/deps.sh fuzz` (make fuzz): clang and its libFuzzer runtime as well.
+[ "${1:-}" = fuzz ] && PKGS+=(clang libclang-rt-14-dev)
 missing=()
 for p in "${PKGS[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
