@@ -144,10 +144,12 @@ void Trigger::fire() {
     for (int k = 0; k < count_ && !stop_; ++k) {
       std::this_thread::sleep_until(next);
       out_.set(true);
+      // The next rise is a period after this one really happened: after a late pulse the train runs late
+      // rather than catching up with two pulses closer than the scanner's frame period.
+      next = std::chrono::steady_clock::now() + period_;
       std::this_thread::sleep_for(width_);
       out_.set(false);
       ++fired_;
-      next += period_;
     }
     running_ = false;
   });
