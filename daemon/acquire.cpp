@@ -110,4 +110,18 @@ Acquisition acquire_view(dr::Positioner& positioner, ScanHead& head, const sp::C
   return out;
 }
 
+Acquisition take_whole(const std::function<Acquisition()>& take, int attempts,
+                       const std::function<void(const std::string&)>& log) {
+  if (attempts < 1) throw sp::DataError("take_whole: attempts " + std::to_string(attempts) + " (at least 1)");
+  Acquisition best = take();
+  for (int a = 2; a <= attempts && best.lost_profiles > 0; ++a) {
+    if (log)
+      log(std::to_string(best.lost_profiles) + " of " + std::to_string(best.image.rows) +
+          " profiles lost in the sweep; taking it again (attempt " + std::to_string(a) + " of " + std::to_string(attempts) + ")");
+    Acquisition next = take();
+    if (next.lost_profiles < best.lost_profiles) best = std::move(next);
+  }
+  return best;
+}
+
 }  // namespace scancell::daemon

@@ -24,4 +24,11 @@ Acquisition acquire_view(drivers::Positioner& positioner, ScanHead& head, const 
                          const JobSettings& settings, const std::atomic<int>& stop,
                          const std::function<void(const std::string&)>& phase = {});
 
+/// A measurement that must be whole (calibration): a sweep that lost profiles is taken again, up to
+/// `attempts` times in all, each retake told to `log`. Returns the first complete take; when every take lost
+/// profiles, the one that lost fewest (the fits downstream then judge whether it still serves). A lost profile
+/// is a missed position compare, not a property of the target, so repeating the sweep is the remedy.
+Acquisition take_whole(const std::function<Acquisition()>& take, int attempts,
+                       const std::function<void(const std::string&)>& log = {});
+
 }  // namespace scancell::daemon

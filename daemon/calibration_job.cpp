@@ -15,6 +15,9 @@ namespace sp = scancell::planner;
 namespace cal = scancell::calibration;
 using nlohmann::json;
 
+/// Sweeps per calibration scan before its best take is fitted as it is (see take_whole).
+constexpr int kCalibrationScanAttempts = 3;
+
 void check_calibration_kind(const std::string& kind) {
   if (kind != "sensor" && kind != "turntable_axis" && kind != "positioner")
     throw std::invalid_argument("calibrate: kind must be sensor, turntable_axis or positioner, got '" + kind + "'");
@@ -44,9 +47,16 @@ JobState run_calibration_job(Journal& journal, std::int64_t job, const std::stri
     cal::RunContext ctx{placed, models.sensor, {}, {}, {}};
     ctx.scan = [&](const sp::JointVector& q, double length) {
       ++progress.view;
-      return acquire_view(positioner, *head, placed, models.sensor, q, length, settings, stop, [&](const std::string& what) {
-               progress.event = "calibration scan " + std::to_string(progress.view) + ": " + what;
-               report(progress);
+      // Calibration fits read every profile of a target: a sweep that lost some (a loaded machine misses
+      // position compares) is retaken rather than fitted with a hole where a sphere was.
+      const auto take = [&] {
+        return acquire_view(positioner, *head, placed, models.sensor, q, length, settings, stop, [&](const std::string& what) {
+          progress.event = "calibration scan " + std::to_string(progress.view) + ": " + what;
+          report(progress);
+        });
+      };
+      return take_whole(take, kCalibrationScanAttempts, [&](const std::string& line) {
+               journal.event(job, "calibration scan " + std::to_string(progress.view) + ": " + line);
              }).image;
     };
     ctx.move = [&](const sp::JointVector& q) {

@@ -11,6 +11,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "daemon/acquire.hpp"
 #include "daemon/cell_io.hpp"
 #include "daemon/job_runner.hpp"
 #include "planner/config.hpp"
@@ -110,6 +111,33 @@ struct SimCell : ::testing::Test {
     return n;
   }
 };
+
+// A calibration sweep that lost profiles is taken again (the CI flake: a loaded machine lost the profiles
+// across one sphere of the tripod and the positioner run failed with "0 points"), and the best take wins.
+TEST(TakeWhole, RetakesASweepThatLostProfilesAndKeepsTheBestTake) {
+  std::vector<int> lost = {40, 3, 0, 7};
+  std::size_t calls = 0;
+  std::vector<std::string> log;
+  const auto take = [&] {
+    Acquisition a;
+    a.image.rows = 200;
+    a.lost_profiles = lost.at(calls++);
+    return a;
+  };
+  EXPECT_EQ(take_whole(take, 3, [&](const std::string& l) { log.push_back(l); }).lost_profiles, 0);
+  EXPECT_EQ(calls, 3u);
+  ASSERT_EQ(log.size(), 2u);
+  EXPECT_EQ(log[0], "40 of 200 profiles lost in the sweep; taking it again (attempt 2 of 3)");
+  calls = 0;
+  lost = {40, 9, 12};
+  EXPECT_EQ(take_whole(take, 3).lost_profiles, 9);  // every take lost some: the fewest
+  EXPECT_EQ(calls, 3u);
+  calls = 0;
+  lost = {0};
+  EXPECT_EQ(take_whole(take, 3).lost_profiles, 0);  // a whole sweep is taken once
+  EXPECT_EQ(calls, 1u);
+  EXPECT_THROW(take_whole(take, 0), sp::DataError);
+}
 
 TEST_F(SimCell, CubeJobMeasuresEverythingTheCellCanMeasure) {
   const auto job = submit(write_cube(dir));
