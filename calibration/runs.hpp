@@ -12,7 +12,7 @@
 #include "calibration/targets.hpp"
 #include "planner/kinematics/cell.hpp"
 #include "planner/core/sensor.hpp"
-#include "planner/sim/virtual_scanner.hpp"
+#include "planner/scan/range_image.hpp"
 
 namespace scancell::calibration {
 

@@ -86,6 +86,7 @@ Acquisition acquire_view(dr::Positioner& positioner, ScanHead& head, const sp::C
   img.pose.camera_to_object = sp::forward_kinematics(cell, qs);
   img.pose.scan_length_mm = L;
   img.samples.assign(static_cast<std::size_t>(n_cols) * n_rows, sp::RangeSample{});
+  bool with_truth = false;  // a simulated scanner's ground truth, carried beside the samples
   const Eigen::Isometry3d object_to_view = img.pose.camera_to_object.inverse();
   for (std::size_t k = 0; k < fired_rows.size(); ++k) {
     const dr::Profile prof = head.scanner().acquire(std::chrono::milliseconds(2000));
@@ -99,7 +100,13 @@ Acquisition acquire_view(dr::Positioner& positioner, ScanHead& head, const sp::C
       // says the camera's pose was (the position read back at the trigger): a model error shows up here.
       s.object_mm = (fired_pose[k] * s.camera_mm.cast<double>()).cast<float>();
       s.camera_mm = (object_to_view * s.object_mm.cast<double>()).cast<float>();
-      img.samples[static_cast<std::size_t>(fired_rows[k]) * n_cols + i] = s;
+      const std::size_t at = static_cast<std::size_t>(fired_rows[k]) * n_cols + i;
+      img.samples[at] = s;
+      if (!prof.truth.empty()) {
+        if (!with_truth) img.truth.assign(img.samples.size(), sp::SampleTruth{});
+        with_truth = true;
+        img.truth[at] = prof.truth[static_cast<std::size_t>(i)];
+      }
     }
   }
   img.acquired_rows.assign(static_cast<std::size_t>(n_rows), 0);
@@ -110,16 +117,30 @@ Acquisition acquire_view(dr::Positioner& positioner, ScanHead& head, const sp::C
   return out;
 }
 
-Acquisition take_whole(const std::function<Acquisition()>& take, int attempts,
+int longest_lost_run(const sp::RangeImage& image) {
+  int run = 0, longest = 0;
+  for (const std::uint8_t acquired : image.acquired_rows) {
+    run = acquired ? 0 : run + 1;
+    longest = std::max(longest, run);
+  }
+  return longest;
+}
+
+Acquisition take_whole(const std::function<Acquisition()>& take, int attempts, int max_gap_rows,
                        const std::function<void(const std::string&)>& log) {
   if (attempts < 1) throw sp::DataError("take_whole: attempts " + std::to_string(attempts) + " (at least 1)");
   Acquisition best = take();
-  for (int a = 2; a <= attempts && best.lost_profiles > 0; ++a) {
+  int gap = longest_lost_run(best.image);
+  for (int a = 2; a <= attempts && gap > max_gap_rows; ++a) {
     if (log)
-      log(std::to_string(best.lost_profiles) + " of " + std::to_string(best.image.rows) +
-          " profiles lost in the sweep; taking it again (attempt " + std::to_string(a) + " of " + std::to_string(attempts) + ")");
+      log(std::to_string(gap) + " profiles in a row lost in the sweep (" + std::to_string(best.lost_profiles) + " of " +
+          std::to_string(best.image.rows) + " in all); taking it again (attempt " + std::to_string(a) + " of " + std::to_string(attempts) + ")");
     Acquisition next = take();
-    if (next.lost_profiles < best.lost_profiles) best = std::move(next);
+    const int next_gap = longest_lost_run(next.image);
+    if (next_gap < gap) {
+      best = std::move(next);
+      gap = next_gap;
+    }
   }
   return best;
 }

@@ -24,11 +24,16 @@ Acquisition acquire_view(drivers::Positioner& positioner, ScanHead& head, const 
                          const JobSettings& settings, const std::atomic<int>& stop,
                          const std::function<void(const std::string&)>& phase = {});
 
-/// A measurement that must be whole (calibration): a sweep that lost profiles is taken again, up to
-/// `attempts` times in all, each retake told to `log`. Returns the first complete take; when every take lost
-/// profiles, the one that lost fewest (the fits downstream then judge whether it still serves). A lost profile
-/// is a missed position compare, not a property of the target, so repeating the sweep is the remedy.
-Acquisition take_whole(const std::function<Acquisition()>& take, int attempts,
+/// The most profiles in a row the sweep passed without firing (0 when every row was acquired).
+int longest_lost_run(const planner::RangeImage& image);
+
+/// A measurement that must have no hole (calibration): a sweep that lost more than `max_gap_rows` profiles
+/// in a row is taken again, up to `attempts` sweeps in all, each retake told to `log`. Returns the first take
+/// without such a gap; when every take has one, the take with the shortest (the fits downstream then judge
+/// whether it still serves). Single lost profiles are normal for a polled sweep and harmless to a fit; a run
+/// of them is a stall that can hide a whole target (CI: a tripod sphere with 0 points). A lost profile is a
+/// missed position compare, not a property of the target, so repeating the sweep is the remedy.
+Acquisition take_whole(const std::function<Acquisition()>& take, int attempts, int max_gap_rows,
                        const std::function<void(const std::string&)>& log = {});
 
 }  // namespace scancell::daemon

@@ -15,8 +15,10 @@ namespace sp = scancell::planner;
 namespace cal = scancell::calibration;
 using nlohmann::json;
 
-/// Sweeps per calibration scan before its best take is fitted as it is (see take_whole).
+/// Sweeps per calibration scan before its best take is fitted as it is, and the longest run of lost profiles
+/// a take may have (see take_whole): on an idle machine a third of the sweeps lose 1-7 profiles, singly.
 constexpr int kCalibrationScanAttempts = 3;
+constexpr int kCalibrationMaxGapRows = 4;
 
 void check_calibration_kind(const std::string& kind) {
   if (kind != "sensor" && kind != "turntable_axis" && kind != "positioner")
@@ -55,7 +57,7 @@ JobState run_calibration_job(Journal& journal, std::int64_t job, const std::stri
           report(progress);
         });
       };
-      return take_whole(take, kCalibrationScanAttempts, [&](const std::string& line) {
+      return take_whole(take, kCalibrationScanAttempts, kCalibrationMaxGapRows, [&](const std::string& line) {
                journal.event(job, "calibration scan " + std::to_string(progress.view) + ": " + line);
              }).image;
     };

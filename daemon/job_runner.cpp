@@ -379,19 +379,23 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
     const sp::TriangleMesh& fine = j.truth_object;
     double ss = 0.0, ssn = 0.0;
     std::size_t n = 0, nn = 0, off = 0;
-    for (auto img : images) {
+    for (std::size_t v = 0; v < images.size(); ++v) {
+      auto img = images[v];
+      if (img.truth.size() != img.samples.size())
+        throw sp::DataError("scan " + std::to_string(v) + " has no simulation truth: the ground-truth check needs the simulated scanner's images");
       // The samples the daemon counted as compliant, as it counted them (their density from the stored,
       // noisy positions), moved to where they really are.
       std::vector<std::uint8_t> compliant = sp::MeasuredCoverage::compliant_samples(img, j.spec);
       for (std::size_t k = 0; k < img.samples.size(); ++k) {
         auto& smp = img.samples[k];
         if (smp.valid()) {
-          const Eigen::Vector3d e = (smp.object_mm - smp.true_object_mm).cast<double>();
+          const sp::SampleTruth& truth_k = img.truth[k];
+          const Eigen::Vector3d e = (smp.object_mm - truth_k.object_mm).cast<double>();
           ss += e.squaredNorm();
           ++n;
-          smp.object_mm = smp.true_object_mm;
-          if (smp.triangle >= fine.triangles.size()) continue;  // the plate
-          const auto& t = fine.triangles[smp.triangle];
+          smp.object_mm = truth_k.object_mm;
+          if (truth_k.triangle >= fine.triangles.size()) continue;  // the plate
+          const auto& t = fine.triangles[truth_k.triangle];
           const Eigen::Vector3d normal =
               (fine.vertices[t[1]] - fine.vertices[t[0]]).cross(fine.vertices[t[2]] - fine.vertices[t[0]]).normalized();
           const double en = std::abs(e.dot(normal));

@@ -46,6 +46,7 @@ void SimScanner::measure_loop() {
     o.object_triangles = object_triangles_;
     const planner::RangeImage img = planner::virtual_scan(scene_, one, pose, o);
     p.samples.assign(img.samples.begin(), img.samples.begin() + img.columns);
+    p.truth.assign(img.truth.begin(), img.truth.begin() + img.columns);
     {
       std::lock_guard<std::mutex> lock(mu_);
       ready_.push_back(std::move(p));

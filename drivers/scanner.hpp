@@ -26,6 +26,7 @@ struct Profile {
   std::chrono::steady_clock::time_point time;
   Eigen::Isometry3d camera_to_object = Eigen::Isometry3d::Identity();  // where the camera was
   std::vector<planner::RangeSample> samples;          // N_x, laser at the camera origin; invalid where no return
+  std::vector<planner::SampleTruth> truth;            // simulated scanners only, parallel to samples; else empty
 };
 
 class Scanner {

@@ -3,7 +3,7 @@
 
 #include "fuzz/fuzz.hpp"
 #include "planner/errors.hpp"
-#include "planner/sim/virtual_scanner.hpp"
+#include "planner/scan/range_image.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   try {

@@ -10,7 +10,7 @@
 #include "planner/geometry/mesh.hpp"
 #include "planner/core/sensor.hpp"
 #include "planner/core/viewpoint.hpp"
-#include "planner/sim/virtual_scanner.hpp"
+#include "planner/scan/range_image.hpp"
 
 namespace scancell::planner {
 

@@ -18,7 +18,7 @@
 #include <Eigen/Geometry>
 
 #include "planner/geometry/mesh.hpp"
-#include "planner/sim/virtual_scanner.hpp"
+#include "planner/scan/range_image.hpp"
 
 namespace scancell::planner {
 

@@ -13,7 +13,7 @@
 
 #include "planner/core/rough_model.hpp"
 #include "planner/core/sensor.hpp"
-#include "planner/sim/virtual_scanner.hpp"
+#include "planner/scan/range_image.hpp"
 
 namespace scancell::planner {
 

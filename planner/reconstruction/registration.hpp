@@ -14,7 +14,7 @@
 
 #include "planner/geometry/mesh.hpp"
 #include "planner/kinematics/pose_error.hpp"
-#include "planner/sim/virtual_scanner.hpp"
+#include "planner/scan/range_image.hpp"
 
 namespace scancell::planner {
 

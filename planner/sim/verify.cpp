@@ -50,6 +50,8 @@ std::vector<std::uint8_t> vertices_measured(const TriangleMesh& fine, const std:
                                             const std::vector<Eigen::Vector3d>& tri_normals, const RangeImage& img,
                                             const ModelSpec& spec, std::size_t* compliant_samples) {
   const std::size_t nv = fine.vertices.size();
+  // The side test below reads the triangle each sample hit: simulation truth (callers check it is there).
+  if (img.truth.size() != img.samples.size()) throw DataError("verification needs the simulated scanner's truth for every sample");
   const double radius = 1.0 / std::sqrt(spec.density_per_mm2);
   SampleGrid grid;
   grid.cell = radius;
@@ -86,7 +88,7 @@ std::vector<std::uint8_t> vertices_measured(const TriangleMesh& fine, const std:
                 const RangeSample& s = img.samples[it->second];
                 if ((s.object_mm.cast<double>() - p).squaredNorm() > radius * radius) continue;
                 // The sample must lie on the vertex's side of the surface (thin walls, sheet edges).
-                if (tri_normals[s.triangle].dot(vertex_normals[v]) <= 0.0) continue;
+                if (tri_normals[img.truth[it->second].triangle].dot(vertex_normals[v]) <= 0.0) continue;
                 found = true;
                 break;
               }
@@ -197,9 +199,13 @@ Verification verify_images(const TriangleMesh& fine, const ModelSpec& spec, cons
   out.measured.assign(nv, 0);
   double cumulative = 0.0;
   for (std::size_t k = 0; k < images.size(); ++k) {
-    for (const auto& s : images[k].samples)
-      if (s.valid() && s.triangle >= fine.triangles.size())
-        throw DataError("scan " + std::to_string(k) + ": triangle id " + std::to_string(s.triangle) +
+    const RangeImage& im = images[k];
+    if (im.truth.size() != im.samples.size())
+      throw DataError("scan " + std::to_string(k) + " has no simulation truth (a real scanner's image?): verification against the "
+                      "fine model needs the triangle each sample hit, which only the virtual scanner records");
+    for (std::size_t q = 0; q < im.samples.size(); ++q)
+      if (im.samples[q].valid() && im.truth[q].triangle >= fine.triangles.size())
+        throw DataError("scan " + std::to_string(k) + ": triangle id " + std::to_string(im.truth[q].triangle) +
                         " beyond the fine model's " + std::to_string(fine.triangles.size()) + " (not a scan of this model)");
     ViewVerification vv;
     vv.executed = images[k].pose;

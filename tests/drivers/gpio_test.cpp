@@ -166,12 +166,13 @@ TEST(SimScanner, OneProfilePerTriggerPulseAtTheAxesPose) {
     const dr::Profile p = scanner.acquire(1000ms);
     EXPECT_EQ(p.index, static_cast<std::uint64_t>(k));
     ASSERT_EQ(p.samples.size(), static_cast<std::size_t>(sensor.samples_x));
+    ASSERT_EQ(p.truth.size(), p.samples.size());
     std::size_t valid = 0;
-    for (const auto& s : p.samples) {
-      if (!s.valid()) continue;
+    for (std::size_t c = 0; c < p.samples.size(); ++c) {
+      if (!p.samples[c].valid()) continue;
       ++valid;
-      EXPECT_NEAR(s.true_object_mm.z(), 0.0, 1e-3);
-      EXPECT_NEAR(s.true_object_mm.y(), 0.5 * k, 1e-3);
+      EXPECT_NEAR(p.truth[c].object_mm.z(), 0.0, 1e-3);
+      EXPECT_NEAR(p.truth[c].object_mm.y(), 0.5 * k, 1e-3);
     }
     EXPECT_EQ(valid, static_cast<std::size_t>(sensor.samples_x));
   }

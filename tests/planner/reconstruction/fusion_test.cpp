@@ -10,6 +10,7 @@
 
 #include <gtest/gtest.h>
 
+#include "planner/sim/virtual_scanner.hpp"
 #include "planner/config.hpp"
 #include "planner/errors.hpp"
 #include "planner/reconstruction/fusion.hpp"

@@ -1,6 +1,7 @@
 // Measured coverage on the rough model from acquired range images, and replanning for what is left.
 #include <gtest/gtest.h>
 
+#include "planner/sim/virtual_scanner.hpp"
 #include "planner/config.hpp"
 #include "planner/errors.hpp"
 #include "planner/reconstruction/measured_coverage.hpp"

@@ -174,7 +174,7 @@ TEST(Registration, PartialRegistrationOfAFaceSeenAloneMovesItOnlyAcrossTheFace) 
   const Eigen::Vector3d off(0.7, 0.7, 0.3);
   for (auto& s : img.samples)
     if (s.valid()) {
-      if (s.object_mm.z() < 49.9) s.triangle = kNoHit;
+      if (s.object_mm.z() < 49.9) s.measured = false;
       else s.object_mm += off.cast<float>();
     }
   IcpOptions o;

@@ -1,9 +1,11 @@
 // Virtual scanner: sample count and spacing on a plane at known range (eq. 3.6/3.7), noise statistics
 // (eq. 3.4), bi-static shadow, grazing cut-off, range-image files.
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include "planner/errors.hpp"
@@ -50,7 +52,8 @@ TEST(VirtualScanner, PlaneAtKnownRangeGivesEverySampleWithTheModelSpacing) {
   EXPECT_EQ(st.samples, 256u * 256u);
   EXPECT_EQ(img.valid_count(), 256u * 256u);
   // Every sample on the plane, at range z.
-  for (const auto& smp : img.samples) ASSERT_NEAR(smp.true_object_mm.z(), 0.0, 1e-3);
+  ASSERT_EQ(img.truth.size(), img.samples.size());
+  for (const auto& t : img.truth) ASSERT_NEAR(t.object_mm.z(), 0.0, 1e-3);
   EXPECT_NEAR(img.at(128, 128).camera_mm.z(), -z, 1e-3);
   // eq. 3.6: δx = R_xz·Φx/(N_x − 1) at the centre (θ_xz = 0); eq. 3.7: δy = L_y/(N_y − 1).
   const double dx = z * s.fov_x_rad / 255.0, dy = L / 255.0;
@@ -77,8 +80,9 @@ TEST(VirtualScanner, RangeNoiseMatchesEquation34) {
   EXPECT_NEAR(sigma, 0.019837, 1e-6);
   double sum = 0.0, sum2 = 0.0;
   std::size_t n = 0;
-  for (const auto& smp : img.samples) {
-    const double e = static_cast<double>(smp.object_mm.z()) - smp.true_object_mm.z();
+  for (std::size_t k = 0; k < img.samples.size(); ++k) {
+    const auto& smp = img.samples[k];
+    const double e = static_cast<double>(smp.object_mm.z()) - img.truth[k].object_mm.z();
     EXPECT_NEAR(smp.sigma_z_mm, sigma, 1e-6);
     sum += e;
     sum2 += e * e;
@@ -173,11 +177,33 @@ TEST(VirtualScanner, RangeImageFileRoundTripsAndRefusesDamage) {
   EXPECT_NEAR(back.pose.scan_length_mm, 40.0, 0);
   EXPECT_TRUE(back.pose.camera_to_object.isApprox(img.pose.camera_to_object, 1e-15));
   ASSERT_EQ(back.valid_count(), img.valid_count());
+  ASSERT_EQ(back.truth.size(), back.samples.size());
   for (std::size_t k = 0; k < img.samples.size(); ++k) {
-    ASSERT_EQ(back.samples[k].triangle, img.samples[k].triangle);
+    ASSERT_EQ(back.samples[k].valid(), img.samples[k].valid());
     if (img.samples[k].valid()) {
       ASSERT_EQ(back.samples[k].object_mm, img.samples[k].object_mm);
+      ASSERT_EQ(back.truth[k].triangle, img.truth[k].triangle);
+      ASSERT_EQ(back.truth[k].object_mm, img.truth[k].object_mm);
     }
+  }
+  // A real scanner's image has no simulation truth: it is written with kNoTriangle, read back without
+  // truth, and verification refuses it instead of judging it by invented triangles.
+  sp::RangeImage real = img;
+  real.truth.clear();
+  const sp::RangeImage real_back = sp::range_image_from_ply(sp::range_image_to_ply(real), "real.ply");
+  EXPECT_TRUE(real_back.truth.empty());
+  ASSERT_EQ(real_back.valid_count(), img.valid_count());
+  // Truth on some samples only: refused, naming how many.
+  std::string mixed = sp::range_image_to_ply(img);
+  const std::size_t first_record = mixed.find("end_header\n") + 11;
+  const std::uint32_t none = sp::kNoTriangle;
+  std::memcpy(&mixed[first_record + 48], &none, 4);
+  try {
+    sp::range_image_from_ply(mixed, "mixed.ply");
+    ADD_FAILURE() << "mixed truth accepted";
+  } catch (const sp::DataError& e) {
+    EXPECT_THAT(e.what(), ::testing::HasSubstr("mixed.ply: " + std::to_string(img.valid_count() - 1) + " of " +
+                                                   std::to_string(img.valid_count()) + " samples carry a triangle id"));
   }
   // Truncated body: refused with the byte counts.
   const auto size = std::filesystem::file_size(file);

@@ -1,0 +1,235 @@
+#include "planner/scan/range_image.hpp"
+
+#include <bit>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <limits>
+#include <sstream>
+#include <string>
+
+#include "planner/errors.hpp"
+
+namespace scancell::planner {
+
+std::size_t RangeImage::valid_count() const {
+  std::size_t n = 0;
+  for (const auto& s : samples) n += s.valid();
+  return n;
+}
+
+double sample_density_per_mm2(const RangeImage& img, int i, int j) {
+  const RangeSample& c = img.at(i, j);
+  if (!c.valid()) return 0.0;
+  auto chord = [&](int a, int b) {
+    if (a < 0 || b < 0 || a >= img.columns || b >= img.rows) return std::numeric_limits<double>::infinity();
+    const RangeSample& o = img.at(a, b);
+    return o.valid() ? static_cast<double>((o.object_mm - c.object_mm).norm()) : std::numeric_limits<double>::infinity();
+  };
+  // The mean of the two chords (the minimum would be biased low by the range noise), unless one is a jump
+  // (over twice the other): across a depth step the far side says nothing about this surface's sampling.
+  auto spacing = [](double a, double b) {
+    if (!std::isfinite(a) || !std::isfinite(b)) return std::min(a, b);
+    return std::max(a, b) > 2.0 * std::min(a, b) ? std::min(a, b) : 0.5 * (a + b);
+  };
+  const double dx = spacing(chord(i - 1, j), chord(i + 1, j));
+  const double dy = spacing(chord(i, j - 1), chord(i, j + 1));
+  if (!std::isfinite(dx) || !std::isfinite(dy)) return 0.0;
+  const double d2 = dx * dx + dy * dy;
+  return d2 > 0.0 ? 1.0 / d2 : 0.0;
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// Range image files: binary little-endian PLY with the image's geometry in comments.
+
+namespace {
+
+constexpr const char* kProperties[] = {
+    "property int column",        "property int row",          "property float x",     "property float y",
+    "property float z",           "property float camera_x",   "property float camera_y", "property float camera_z",
+    "property float true_x",      "property float true_y",     "property float true_z",   "property float sigma_z_mm",
+    "property uint triangle"};
+constexpr std::size_t kRecordBytes = 2 * 4 + 10 * 4 + 4;
+
+template <class T>
+void put(std::string& buf, T v) {
+  char b[sizeof(T)];
+  std::memcpy(b, &v, sizeof(T));
+  buf.append(b, sizeof(T));
+}
+template <class T>
+T take(const char*& p) {
+  T v;
+  std::memcpy(&v, p, sizeof(T));
+  p += sizeof(T);
+  return v;
+}
+
+}  // namespace
+
+std::string range_image_to_ply(const RangeImage& img) {
+  static_assert(std::endian::native == std::endian::little, "range image files are little-endian");
+  std::ostringstream h;
+  h << "ply\nformat binary_little_endian 1.0\n";
+  h << "comment scancell range image 1\n";
+  h << "comment kind " << (img.kind == SensorKind::line_scan ? "line_scan" : "random_access") << "\n";
+  h << "comment columns " << img.columns << "\ncomment rows " << img.rows << "\n";
+  char num[64];
+  std::snprintf(num, sizeof num, "%.17g", img.pose.scan_length_mm);
+  h << "comment scan_length_mm " << num << "\ncomment camera_to_object";
+  const Eigen::Matrix4d m = img.pose.camera_to_object.matrix();
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) {
+      std::snprintf(num, sizeof num, " %.17g", m(r, c));
+      h << num;
+    }
+  h << "\nelement vertex " << img.valid_count() << "\n";
+  for (const char* p : kProperties) h << p << "\n";
+  h << "end_header\n";
+  std::string buf = h.str();
+  if (!img.truth.empty() && img.truth.size() != img.samples.size())
+    throw DataError("range image: " + std::to_string(img.truth.size()) + " truth records for " + std::to_string(img.samples.size()) + " samples");
+  for (int j = 0; j < img.rows; ++j)
+    for (int i = 0; i < img.columns; ++i) {
+      const RangeSample& s = img.at(i, j);
+      if (!s.valid()) continue;
+      // Without simulation truth the true point repeats the measured one and the triangle is kNoTriangle.
+      const std::size_t at = static_cast<std::size_t>(j) * img.columns + i;
+      const SampleTruth t = img.truth.empty() ? SampleTruth{s.object_mm, kNoTriangle} : img.truth[at];
+      put<std::int32_t>(buf, i);
+      put<std::int32_t>(buf, j);
+      for (const auto* v : {&s.object_mm, &s.camera_mm, &t.object_mm})
+        for (int k = 0; k < 3; ++k) put<float>(buf, (*v)[k]);
+      put<float>(buf, s.sigma_z_mm);
+      put<std::uint32_t>(buf, t.triangle);
+    }
+  return buf;
+}
+
+void save_range_image(const RangeImage& img, const std::filesystem::path& path) {
+  const std::string buf = range_image_to_ply(img);
+  const std::filesystem::path tmp = path.string() + ".tmp";
+  {
+    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
+    if (!f) throw std::runtime_error(path.string() + ": cannot open for writing");
+    f.write(buf.data(), static_cast<std::streamsize>(buf.size()));
+    if (!f.flush()) throw std::runtime_error(path.string() + ": write failed");
+  }
+  std::filesystem::rename(tmp, path);
+}
+
+RangeImage load_range_image(const std::filesystem::path& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw DataError(path.string() + ": cannot open file");
+  const std::string data((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  return range_image_from_ply(data, path.string());
+}
+
+RangeImage range_image_from_ply(const std::string& data, const std::string& name) {
+  auto fail = [&](const std::string& why) -> void { throw DataError(name + ": " + why); };
+  const std::size_t end = data.find("end_header\n");
+  if (data.rfind("ply\n", 0) != 0 || end == std::string::npos) fail("not a PLY file (no 'ply' / 'end_header')");
+  std::istringstream header(data.substr(0, end));
+  std::string line;
+  RangeImage img;
+  bool have_kind = false, have_cols = false, have_rows = false, have_len = false, have_pose = false, have_tag = false;
+  std::size_t count = 0, prop = 0, line_no = 0;
+  bool have_count = false;
+  while (std::getline(header, line)) {
+    ++line_no;
+    const std::string where = "header line " + std::to_string(line_no) + " '" + line + "'";
+    std::istringstream ls(line);
+    std::string w0, w1;
+    ls >> w0;
+    if (line_no == 1) continue;
+    if (line_no == 2) {
+      if (line != "format binary_little_endian 1.0") fail(where + ": expected binary_little_endian 1.0");
+      continue;
+    }
+    if (w0 == "comment") {
+      ls >> w1;
+      if (w1 == "scancell") { have_tag = line == "comment scancell range image 1"; if (!have_tag) fail(where + ": unsupported version"); }
+      else if (w1 == "kind") {
+        std::string k;
+        ls >> k;
+        if (k == "line_scan") img.kind = SensorKind::line_scan;
+        else if (k == "random_access") img.kind = SensorKind::random_access;
+        else fail(where + ": unknown kind");
+        have_kind = true;
+      } else if (w1 == "columns") { have_cols = static_cast<bool>(ls >> img.columns) && img.columns >= 2 && img.columns <= 1 << 16; if (!have_cols) fail(where + ": columns must be in [2, 65536]"); }
+      else if (w1 == "rows") { have_rows = static_cast<bool>(ls >> img.rows) && img.rows >= 2 && img.rows <= 1 << 16; if (!have_rows) fail(where + ": rows must be in [2, 65536]"); }
+      else if (w1 == "scan_length_mm") { have_len = static_cast<bool>(ls >> img.pose.scan_length_mm) && std::isfinite(img.pose.scan_length_mm) && img.pose.scan_length_mm >= 0.0; if (!have_len) fail(where + ": bad scan length"); }
+      else if (w1 == "camera_to_object") {
+        Eigen::Matrix4d m;
+        for (int r = 0; r < 4; ++r)
+          for (int c = 0; c < 4; ++c)
+            if (!(ls >> m(r, c)) || !std::isfinite(m(r, c))) fail(where + ": needs 16 finite numbers");
+        const Eigen::Matrix3d rot = m.topLeftCorner<3, 3>();
+        if (!(rot.transpose() * rot).isApprox(Eigen::Matrix3d::Identity(), 1e-6) || rot.determinant() < 0.0)
+          fail(where + ": rotation part is not a rotation");
+        img.pose.camera_to_object.matrix() = m;
+        have_pose = true;
+      }
+      continue;
+    }
+    if (w0 == "element") {
+      std::string kind;
+      if (!(ls >> kind >> count) || kind != "vertex") fail(where + ": expected 'element vertex N'");
+      have_count = true;
+      continue;
+    }
+    if (w0 == "property") {
+      if (prop >= std::size(kProperties) || line != kProperties[prop]) fail(where + ": expected '" + std::string(prop < std::size(kProperties) ? kProperties[prop] : "end_header") + "'");
+      ++prop;
+      continue;
+    }
+    fail(where + ": unexpected header line");
+  }
+  if (!have_tag) fail("missing 'comment scancell range image 1' (not a scancell range image)");
+  if (!have_kind || !have_cols || !have_rows || !have_len || !have_pose || !have_count)
+    fail("header lacks one of kind, columns, rows, scan_length_mm, camera_to_object, element vertex");
+  if (prop != std::size(kProperties)) fail("header has " + std::to_string(prop) + " of " + std::to_string(std::size(kProperties)) + " properties");
+  const std::size_t body = end + std::strlen("end_header\n");
+  // Checked before any multiplication: a count of 2^62 times the record size wraps around 2^64.
+  const std::size_t body_bytes = data.size() - body;
+  const std::size_t max_count = static_cast<std::size_t>(img.columns) * static_cast<std::size_t>(img.rows);
+  if (count > max_count)
+    fail("header: element vertex " + std::to_string(count) + " exceeds the image's " + std::to_string(img.columns) +
+         " x " + std::to_string(img.rows) + " pixels");
+  if (count > body_bytes / kRecordBytes)
+    fail("body has " + std::to_string(body_bytes) + " bytes, too few for " + std::to_string(count) + " samples of " +
+         std::to_string(kRecordBytes) + " bytes (truncated?)");
+  const std::size_t expect = count * kRecordBytes;
+  if (body_bytes != expect)
+    fail("body has " + std::to_string(data.size() - body) + " bytes, " + std::to_string(count) + " samples need " + std::to_string(expect) + " (truncated?)");
+  img.samples.assign(static_cast<std::size_t>(img.columns) * img.rows, RangeSample{});
+  img.truth.assign(img.samples.size(), SampleTruth{});
+  std::size_t with_truth = 0;
+  const char* p = data.data() + body;
+  for (std::size_t k = 0; k < count; ++k) {
+    const int i = take<std::int32_t>(p), j = take<std::int32_t>(p);
+    if (i < 0 || j < 0 || i >= img.columns || j >= img.rows)
+      fail("sample " + std::to_string(k) + ": pixel (" + std::to_string(i) + ", " + std::to_string(j) + ") outside the image");
+    const std::size_t at = static_cast<std::size_t>(j) * img.columns + i;
+    RangeSample& s = img.samples[at];
+    SampleTruth& t = img.truth[at];
+    if (s.valid()) fail("sample " + std::to_string(k) + ": pixel (" + std::to_string(i) + ", " + std::to_string(j) + ") given twice");
+    for (auto* v : {&s.object_mm, &s.camera_mm, &t.object_mm})
+      for (int c = 0; c < 3; ++c) (*v)[c] = take<float>(p);
+    s.sigma_z_mm = take<float>(p);
+    t.triangle = take<std::uint32_t>(p);
+    s.measured = true;
+    if (!s.object_mm.allFinite() || !s.camera_mm.allFinite() || !t.object_mm.allFinite() || !std::isfinite(s.sigma_z_mm) || s.sigma_z_mm < 0.0f)
+      fail("sample " + std::to_string(k) + ": non-finite or negative value");
+    with_truth += t.triangle != kNoTriangle;
+  }
+  // Simulation truth is all or nothing: a real scanner's file has none, a simulated one has it everywhere.
+  if (with_truth != 0 && with_truth != count)
+    fail(std::to_string(with_truth) + " of " + std::to_string(count) +
+         " samples carry a triangle id (simulation truth): a file has it for every sample or for none");
+  if (with_truth == 0) img.truth.clear();
+  return img;
+}
+
+}  // namespace scancell::planner
