@@ -22,7 +22,7 @@
 #include "daemon/phase_trace.hpp"
 #include "drivers/axis.hpp"
 #include "drivers/gpio.hpp"
-#include "drivers/scanner.hpp"
+#include "drivers/sim/sim_scanner.hpp"
 #include "planner/kinematics/cell.hpp"
 #include "planner/config.hpp"
 #include "planner/reconstruction/measured_coverage.hpp"

@@ -15,7 +15,7 @@
 #include "drivers/gpio.hpp"
 #include "drivers/modbus_axis.hpp"
 #include "drivers/modbus_map.hpp"
-#include "drivers/scanner.hpp"
+#include "drivers/sim/sim_scanner.hpp"
 #include "drivers/sim/modbus_sim.hpp"
 #include "planner/config.hpp"
 

@@ -1,4 +1,4 @@
-#include "drivers/scanner.hpp"
+#include "drivers/sim/sim_scanner.hpp"
 
 namespace scancell::drivers {
 
