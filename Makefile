@@ -29,7 +29,7 @@ kill-test: build
 test-asan: deps
 	@$(CMAKE) -S . -B $(ASAN_BUILD) -DCMAKE_BUILD_TYPE=Debug "-DCMAKE_CXX_FLAGS_DEBUG=-O1 -g" -DSCANCELL_SANITIZE=ON -DSCANCELL_BUILD_BENCH=OFF > $(ASAN_BUILD).configure.log 2>&1 || (cat $(ASAN_BUILD).configure.log; exit 1)
 	@$(CMAKE) --build $(ASAN_BUILD) -j$(JOBS) --target planner_tests driver_tests daemon_tests calibration_tests \
-	  fuzz_mesh fuzz_range_image fuzz_plan_file fuzz_config fuzz_control
+	  genicam_tests fuzz_mesh fuzz_range_image fuzz_plan_file fuzz_config fuzz_control
 	LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp UBSAN_OPTIONS=print_stacktrace=1 \
 	  ctest --test-dir $(ASAN_BUILD) --output-on-failure -j$(JOBS) -L 'planner|drivers|daemon|calibration|fuzz'
 

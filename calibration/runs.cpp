@@ -55,7 +55,7 @@ std::vector<Eigen::Vector3d> view_points_where(const sp::RangeImage& img, Keep k
   return out;
 }
 
-double tan_x(const sp::SensorModel& s, int i) { return std::tan(-0.5 * s.fov_x_rad + s.fov_x_rad * i / (s.samples_x - 1)); }
+double tan_x(const sp::SensorModel& s, int i) { return sp::ray_tan_x(s, i); }
 
 /// Incidence angles of the virtual scanner (planner/sim/virtual_scanner.cpp) for a plane normal `n` in the view
 /// frame (facing the camera) and laser ray i: θ_xz against the ray back to the laser, θ_yz in the laser plane.

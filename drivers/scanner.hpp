@@ -18,6 +18,7 @@ struct Profile {
   Eigen::Isometry3d camera_to_object = Eigen::Isometry3d::Identity();  // where the camera was
   std::vector<planner::RangeSample> samples;          // N_x, laser at the camera origin; invalid where no return
   std::vector<planner::SampleTruth> truth;            // simulated scanners only, parallel to samples; else empty
+  bool lost = false;  // triggered but never delivered (lost or incomplete frame): no samples, order kept
 };
 
 class Scanner {

@@ -53,6 +53,13 @@ struct Incidence {
   double theta_yz_rad;
 };
 
+/// tan of ray i's angle across the fan (line scan) or the frame (random access): rays are spaced evenly
+/// in angle from -Φx/2 to +Φx/2, ray i at -Φx/2 + Φx·i/(N_x - 1) (the virtual scanner's and a real
+/// scanner's column geometry).
+inline double ray_tan_x(const SensorModel& s, int i) {
+  return std::tan(-0.5 * s.fov_x_rad + s.fov_x_rad * i / (s.samples_x - 1));
+}
+
 /// Eq. 3.3/3.4: predicted depth noise, +inf where a grazing threshold is exceeded (U_i cuts the measurement).
 inline double predicted_sigma_z_mm(const SensorModel& s, const Incidence& g) {
   if (!(g.theta_yz_rad < s.grazing_yz_rad) || !(g.theta_xz_rad < s.grazing_xz_rad))
