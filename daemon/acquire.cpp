@@ -88,8 +88,14 @@ Acquisition acquire_view(dr::Positioner& positioner, ScanHead& head, const sp::C
   img.samples.assign(static_cast<std::size_t>(n_cols) * n_rows, sp::RangeSample{});
   bool with_truth = false;  // a simulated scanner's ground truth, carried beside the samples
   const Eigen::Isometry3d object_to_view = img.pose.camera_to_object.inverse();
+  img.acquired_rows.assign(static_cast<std::size_t>(n_rows), 0);
+  int delivered = 0;
   for (std::size_t k = 0; k < fired_rows.size(); ++k) {
     const dr::Profile prof = head.scanner().acquire(std::chrono::milliseconds(2000));
+    // Fired but never delivered (a frame lost on the network): the row stays unacquired, in its place.
+    if (prof.lost) continue;
+    img.acquired_rows[static_cast<std::size_t>(fired_rows[k])] = 1;
+    ++delivered;
     if (prof.samples.size() != static_cast<std::size_t>(n_cols))
       throw dr::DriverError(dr::DriverError::Kind::protocol, "scanner", "profile " + std::to_string(prof.index),
                             std::to_string(prof.samples.size()) + " samples, the sensor model has " + std::to_string(n_cols));
@@ -109,10 +115,8 @@ Acquisition acquire_view(dr::Positioner& positioner, ScanHead& head, const sp::C
       }
     }
   }
-  img.acquired_rows.assign(static_cast<std::size_t>(n_rows), 0);
-  for (const int row : fired_rows) img.acquired_rows[static_cast<std::size_t>(row)] = 1;
   Acquisition out;
-  out.lost_profiles = n_rows - static_cast<int>(fired_rows.size());
+  out.lost_profiles = n_rows - delivered;
   out.image = std::move(img);
   return out;
 }

@@ -13,7 +13,7 @@ namespace scancell::daemon {
 
 struct Acquisition {
   planner::RangeImage image;  // nominal pose at mid-sweep; samples carry their own measured positions
-  int lost_profiles = 0;      // profile positions passed between two reads of the sweep
+  int lost_profiles = 0;      // rows without a profile: passed between two reads of the sweep, or lost by the scanner
 };
 
 /// `q`: the view's axis targets (sweep at the middle of its travel); `phase` is told "moving" and

@@ -126,9 +126,12 @@ void Daemon::job_loop() {
     }
     const std::uint64_t seed = config_.scanner_seed;
     const std::optional<SimTruth> truth = config_.truth;
-    auto heads = [&models, seed, &truth](const planner::TriangleMesh& scene, std::size_t object_triangles,
-                                         const planner::CellModel& placed) {
-      return make_sim_head(models.sensor, scene, object_triangles, seed, &placed, truth ? &*truth : nullptr);
+    auto heads = [&models, seed, &truth, this](const planner::TriangleMesh& scene, std::size_t object_triangles,
+                                               const planner::CellModel& placed) {
+      if (config_.scanner_driver == "genicam")
+        return make_genicam_head(models.sensor, config_.genicam, config_.trigger_chip, config_.trigger_offset);
+      return make_sim_head(models.sensor, scene, object_triangles, seed, &placed, truth ? &*truth : nullptr,
+                           config_.scanner_driver == "sim_gige" ? &config_.genicam : nullptr);
     };
     // Claim the job. Under claim_mu_ a pause or abort either finds current_ set (and raises stop_, which is
     // not cleared after this point) or has written its state to the journal first (and the re-read below

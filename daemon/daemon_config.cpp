@@ -63,9 +63,35 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
   {
     sp::Section s = y.section("scanner");
     c.scanner_driver = s.get<std::string>("driver");
-    if (c.scanner_driver != "sim")
-      s.fail(s.key_path("driver"), "only 'sim' is available (a vendor scanner SDK is not part of this build), got '" + c.scanner_driver + "'");
+    if (c.scanner_driver != "sim" && c.scanner_driver != "sim_gige" && c.scanner_driver != "genicam")
+      s.fail(s.key_path("driver"), "must be sim, sim_gige or genicam, got '" + c.scanner_driver + "'");
     c.scanner_seed = s.get_or<std::uint64_t>("seed", 1);
+    if (c.scanner_driver != "sim") {
+      // The GenICam driver's settings, each declared once with its range (drivers/genicam/genicam_scanner.hpp).
+      auto& g = c.genicam;
+      g.device = s.get_or<std::string>("device", c.scanner_driver == "sim_gige" ? "127.0.0.1" : "");
+      g.profiles_per_frame = s.ranged<int>("profiles_per_frame", g.profiles_per_frame, 1, 2048);
+      g.trigger_line = s.get_or<std::string>("trigger_line", g.trigger_line);
+      g.packet_size_bytes = s.ranged<int>("packet_size_bytes", g.packet_size_bytes, 0, 9000);
+      g.mark_columns = s.ranged<int>("mark_columns", g.mark_columns, 0, 2);
+      g.mono16_scale_mm = s.ranged<double>("mono16_scale_mm", g.mono16_scale_mm, 0.0, 1.0);
+      g.mono16_offset_mm = s.ranged<double>("mono16_offset_mm", g.mono16_offset_mm, -10000.0, 10000.0);
+      g.exposure_us = s.ranged<double>("exposure_us", g.exposure_us, 0.0, 1e6);
+      g.stream_buffers = s.ranged<int>("stream_buffers", g.stream_buffers, 2, 1024);
+      try {
+        drivers::check_genicam_config(g, "scanner");
+      } catch (const drivers::DriverError& e) {
+        s.fail(e.where, e.cause);  // e.where is the key path (scanner.device, ...)
+      }
+    }
+    if (c.scanner_driver == "genicam") {
+      sp::Section t = s.section("trigger");
+      c.trigger_chip = t.get<std::string>("chip");
+      c.trigger_offset = static_cast<unsigned>(t.ranged<int>("offset", 0, 0, 1023));
+      t.finish();
+    }
+    if (c.scanner_driver == "genicam" && s.has("truth"))
+      s.fail(s.key_path("truth"), "a simulated cell's truth with a real scanner (driver genicam)");
     if (s.has("truth")) {
       // The simulated cell's truth where it differs from the models: what calibration must recover.
       sp::Section t = s.section("truth");

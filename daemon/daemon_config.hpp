@@ -12,6 +12,8 @@
 #include "daemon/job_runner.hpp"
 #include "drivers/config.hpp"
 
+#include "drivers/genicam/genicam_scanner.hpp"
+
 namespace scancell::daemon {
 
 struct DaemonConfig {
@@ -22,8 +24,13 @@ struct DaemonConfig {
   std::string lcm_url;
   std::filesystem::path socket_path;
   ControlOptions control;  // control.group, max_clients, idle_timeout_s, send_timeout_s
-  std::string scanner_driver = "sim";  // sim: the simulated line scanner (no vendor SDK in this build)
+  /// scanner.driver: sim (the virtual scanner in-process), sim_gige (the same, as a GigE Vision device on
+  /// the loopback read through the GenICam driver), genicam (a real GenICam/GigE Vision line scanner).
+  std::string scanner_driver = "sim";
   std::uint64_t scanner_seed = 1;
+  drivers::GenicamConfig genicam;      // scanner.* keys of sim_gige and genicam
+  std::string trigger_chip;            // genicam: the GPIO output that pulses the scanner's trigger line
+  unsigned trigger_offset = 0;
   std::optional<SimTruth> truth;       // scanner.truth: what the simulated cell really is (calibration tests)
   JobSettings jobs;
   /// jobs.allowed_dirs: a client may name files (mesh, truth, spec, settings) only under these (canonical);

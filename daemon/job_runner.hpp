@@ -22,7 +22,7 @@
 #include "daemon/phase_trace.hpp"
 #include "drivers/axis.hpp"
 #include "drivers/gpio.hpp"
-#include "drivers/sim/sim_scanner.hpp"
+#include "daemon/scan_heads.hpp"
 #include "planner/kinematics/cell.hpp"
 #include "planner/config.hpp"
 #include "planner/reconstruction/measured_coverage.hpp"
@@ -31,42 +31,6 @@
 #include "planner/reconstruction/rough_scan.hpp"
 
 namespace scancell::daemon {
-
-/// The scanner side of the cell for one job: the trigger line and the profiles it produces. A simulated head
-/// also needs to know where the axes are at each trigger (`camera_at`, called just before the pulse, with the
-/// axis positions read back and the pose the cell model computes from them).
-class ScanHead {
- public:
-  virtual ~ScanHead() = default;
-  virtual drivers::DigitalOutput& trigger() = 0;
-  virtual drivers::Scanner& scanner() = 0;
-  virtual void camera_at(const planner::JointVector& /*q*/, const Eigen::Isometry3d& /*modelled camera_to_object*/) {}
-  /// A positioning move has ended (the sweep of a scan is not one): a simulated positioner draws its next
-  /// repeatability error here.
-  virtual void moved() {}
-};
-
-/// Builds the head for a job. `scene_mm` is what is on the table in the object frame (the job's ground-truth
-/// mesh or calibration target, followed by the cell's fixtures from triangle `object_triangles` on) and
-/// `placed_cell` the cell model with the object's placement; a real head ignores both.
-using ScanHeadFactory = std::function<std::unique_ptr<ScanHead>(
-    const planner::TriangleMesh& scene_mm, std::size_t object_triangles, const planner::CellModel& placed_cell)>;
-
-/// What the simulated cell really is, where it differs from the daemon's models: the truth the calibration
-/// runs must recover (their tests compare against it).
-struct SimTruth {
-  std::optional<planner::SensorModel> sensor;                         // true noise and grazing thresholds
-  Eigen::Vector3d table_axis_point_mm = Eigen::Vector3d::Zero();      // true turntable axis
-  Eigen::Vector3d table_axis_direction = Eigen::Vector3d::UnitZ();
-  planner::PoseErrorModel pose_error;                                 // positioner repeatability, one draw per move
-  std::uint64_t seed = 1;
-};
-
-/// A simulated head: drivers::SimScanner wired to its own trigger input. Without a truth the camera is where
-/// the model says; with one, where the true kinematics (and a fresh pose-error draw per positioning move) put it.
-std::unique_ptr<ScanHead> make_sim_head(const planner::SensorModel& sensor, const planner::TriangleMesh& scene_mm,
-                                        std::size_t object_triangles, std::uint64_t seed,
-                                        const planner::CellModel* placed_cell = nullptr, const SimTruth* truth = nullptr);
 
 struct JobSettings {
   int max_rounds = 4;                              // plan rounds before a job that still lacks rows stalls

@@ -26,7 +26,7 @@
 namespace scancell::drivers {
 
 struct SimGigeOptions {
-  std::string interface = "127.0.0.1";   // where the device listens (GVCP port 3956)
+  std::string interface = "127.0.0.1";   // an interface address or name (GVCP port 3956; one device each)
   std::string serial = "SIM0001";        // the device id a driver opens is "scancell-<serial>" or the address
   double scale_mm = 0.01;                // Scan3dCoordinateScale: mm per range count (reach 655 mm)
   double offset_mm = 0.0;                // Scan3dCoordinateOffset

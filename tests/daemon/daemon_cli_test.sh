@@ -27,6 +27,16 @@ write_config "{driver: sim}" "$JOBS, max_roundz: 3}"
 out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
 [ $rc = 4 ] || fail "bad config: exit $rc, want 4"
 echo "$out" | grep -q "jobs.max_roundz: unknown key" || fail "bad config message: $out"
+# The scanner's driver and its GenICam keys are checked at start, by key path.
+write_config "{driver: vendor_sdk}" "$JOBS}"
+out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
+[ $rc = 4 ] && echo "$out" | grep -q "scanner.driver: must be sim, sim_gige or genicam, got 'vendor_sdk'" || fail "bad scanner driver: exit $rc: $out"
+write_config "{driver: genicam, trigger: {chip: gpiochip0, offset: 3}}" "$JOBS}"
+out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
+[ $rc = 4 ] && echo "$out" | grep -q "scanner.device: empty" || fail "genicam without a device: exit $rc: $out"
+write_config "{driver: sim_gige, profiles_per_frame: 4096}" "$JOBS}"
+out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
+[ $rc = 4 ] && echo "$out" | grep -q "scanner.profiles_per_frame" || fail "profiles_per_frame out of range: exit $rc: $out"
 write_config "{driver: sim}" "$JOBS}"
 printf 'rough_scan:\n  tilts_rad: [1.15, x]\n' >> "$W/scancelld.yaml"
 out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
