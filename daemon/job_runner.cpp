@@ -1,6 +1,7 @@
 #include "daemon/job_runner.hpp"
 
 #include "daemon/acquire.hpp"
+#include "daemon/job_product.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -260,6 +261,18 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
       ++views;
       if (state != JobState::aborted && s.note.empty()) images.push_back(sp::range_image_from_ply(journal_.read_scan(s), s.file));
     }
+  // The job's product: every spec-compliant registered sample, whatever the end (an aborted job keeps what
+  // it measured). A failure to write it is reported in the result, not hidden, and does not undo the job.
+  if (views > 0) {
+    const auto cloud = settings_.jobs_dir / std::to_string(j.id) / "cloud.ply";
+    try {
+      const CloudSummary c = write_job_cloud(journal_, j.id, j.spec, cloud);
+      result["cloud"] = cloud.string();
+      result["cloud_points"] = c.points;
+    } catch (const std::exception& e) {
+      result["cloud_error"] = e.what();
+    }
+  }
   result["views"] = views;
   if (!j.rough_quality.is_null()) result["rough_model"] = j.rough_quality;
   if (j.rough && j.coverage) {
@@ -524,6 +537,12 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
         }
       }
       transition(j, JobState::verifying);
+      {
+        // Kept current after each round: the registered cloud so far (durable, like the scans).
+        const CloudSummary c = write_job_cloud(journal_, id, j.spec, settings_.jobs_dir / std::to_string(id) / "cloud.ply");
+        journal_.event(id, "round " + std::to_string(j.round) + ": cloud.ply holds " + std::to_string(c.points) +
+                               " spec-compliant samples from " + std::to_string(c.views) + " views");
+      }
       std::vector<json> infos;
       for (auto pl : plans) infos.push_back(json::parse(journal_.plan_info(pl)));
       const double total_mm2 = j.rough->total_area_mm2;

@@ -95,6 +95,19 @@ std::uint32_t crc_of(const std::string& data) {
 
 }  // namespace
 
+void write_file_durably(const std::filesystem::path& path, const std::string& bytes) {
+  const std::filesystem::path tmp = path.string() + ".tmp";
+  {
+    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
+    if (!f) throw JournalError(tmp.string() + ": cannot open for writing");
+    f.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+    if (!f.flush()) throw JournalError(tmp.string() + ": write failed");
+  }
+  fsync_path(tmp, false);
+  std::filesystem::rename(tmp, path);
+  fsync_path(path.parent_path().empty() ? std::filesystem::path(".") : path.parent_path(), true);
+}
+
 const char* to_string(JobState s) { return kNames.at(s); }
 
 JobState job_state_from(const std::string& s) {
@@ -329,16 +342,7 @@ ScanRecord Journal::store_scan(std::int64_t plan, int view, const std::string& d
     if (s.i64(0) != 0) throw JournalError("journal: plan " + std::to_string(plan) + " view " + std::to_string(view) + " already has its scan");
   }
   ScanRecord rec{plan, view, "scans/p" + std::to_string(plan) + "-v" + std::to_string(view) + ".bin", data.size(), crc_of(data), note};
-  const std::filesystem::path final_path = dir_ / rec.file, tmp = final_path.string() + ".tmp";
-  {
-    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
-    if (!f) throw JournalError(tmp.string() + ": cannot open for writing");
-    f.write(data.data(), static_cast<std::streamsize>(data.size()));
-    if (!f.flush()) throw JournalError(tmp.string() + ": write failed");
-  }
-  fsync_path(tmp, false);
-  std::filesystem::rename(tmp, final_path);
-  fsync_path(dir_ / "scans", true);
+  write_file_durably(dir_ / rec.file, data);
   // Only now, with the file durable under its final name, does the journal reference it.
   Transaction t(db_);
   Stmt(db_, "INSERT INTO scans(plan, view, file, bytes, crc32, note) VALUES (?, ?, ?, ?, ?, ?)")

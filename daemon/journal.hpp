@@ -16,6 +16,10 @@ struct sqlite3;
 
 namespace scancell::daemon {
 
+/// `bytes` under `path` so that after a crash the file is either the old one or complete: written to
+/// PATH.tmp, fsynced, renamed, the directory fsynced. JournalError naming the file otherwise.
+void write_file_durably(const std::filesystem::path& path, const std::string& bytes);
+
 /// A job's life. Every state and every allowed change is in `kJobTransitions` (journal.cpp), and
 /// Journal::set_state refuses any other change; docs/daemon.md draws the same table.
 enum class JobState {

@@ -35,5 +35,9 @@ views=$(grep -o '"views": [0-9]*' "$W/status.json" | head -1 | grep -o '[0-9]*$'
 [ "${views:-0}" -ge 4 ] || { cat "$W/status.json"; fail "only ${views:-0} views executed"; }
 grep -q '"measured_coverage": 0\.[5-9]' "$W/status.json" || { cat "$W/status.json"; fail "measured coverage too low"; }
 grep -q '"ground_truth_checks": "not run' "$W/status.json" || fail "the result does not say why ground truth was not checked"
-echo "sim_gige job: $views views; $(grep -o '"measured_coverage": [0-9.]*' "$W/status.json" | head -1)"
+cloud=$(grep -o '"cloud": "[^"]*"' "$W/status.json" | cut -d'"' -f4)
+[ -s "$cloud" ] || fail "no cloud.ply"
+points=$(grep -o '"cloud_points": [0-9]*' "$W/status.json" | grep -o '[0-9]*$')
+head -c 400 "$cloud" | grep -aq "element vertex $points" || fail "cloud.ply header does not hold $points points"
+echo "sim_gige job: $views views; $(grep -o '"measured_coverage": [0-9.]*' "$W/status.json" | head -1); cloud.ply $points points"
 kill -TERM "$DAEMON_PID"; wait "$DAEMON_PID"; DAEMON_PID=

@@ -1,0 +1,65 @@
+#include "daemon/job_product.hpp"
+
+#include <bit>
+#include <cstring>
+#include <sstream>
+
+#include "planner/reconstruction/measured_coverage.hpp"
+#include "planner/reconstruction/registration.hpp"
+#include "planner/scan/range_image.hpp"
+
+namespace scancell::daemon {
+
+namespace sp = scancell::planner;
+
+namespace {
+
+template <class T>
+void put(std::string& buf, T v) {
+  char b[sizeof(T)];
+  std::memcpy(b, &v, sizeof(T));
+  buf.append(b, sizeof(T));
+}
+
+}  // namespace
+
+CloudSummary write_job_cloud(Journal& journal, std::int64_t job, const sp::ModelSpec& spec, const std::filesystem::path& file) {
+  static_assert(std::endian::native == std::endian::little, "cloud files are little-endian");
+  CloudSummary sum;
+  std::string body;
+  for (const auto& [plan, round] : journal.plan_rounds(job)) {
+    if (round < 0) continue;  // the rough scan: table frame, exploration only
+    for (const auto& s : journal.scans(plan)) {
+      if (!s.note.empty()) continue;  // does not count (its registration failed)
+      const sp::RangeImage img = sp::range_image_from_ply(journal.read_scan(s), s.file);
+      const std::vector<std::uint8_t> ok = sp::MeasuredCoverage::compliant_samples(img, spec);
+      const sp::ScanSamples smp = sp::scan_samples(img);  // valid samples in sample order, with normals
+      std::size_t k = 0;
+      for (std::size_t q = 0; q < img.samples.size(); ++q) {
+        if (!img.samples[q].valid()) continue;
+        const std::size_t at = k++;
+        if (!ok[q]) continue;
+        const auto& p = img.samples[q].object_mm;
+        const Eigen::Vector3d& n = smp.normals[at];
+        for (int c = 0; c < 3; ++c) put<float>(body, p[c]);
+        for (int c = 0; c < 3; ++c) put<float>(body, static_cast<float>(n[c]));
+        put<float>(body, img.samples[q].sigma_z_mm);
+        put<std::int32_t>(body, s.view);
+        put<std::int32_t>(body, round);
+        ++sum.points;
+      }
+      ++sum.views;
+    }
+  }
+  std::ostringstream h;
+  h << "ply\nformat binary_little_endian 1.0\ncomment scancell registered cloud 1\ncomment job " << job
+    << "\ncomment spec precision_mm " << spec.precision_mm << " density_per_mm2 " << spec.density_per_mm2
+    << "\ncomment frame object mm\nelement vertex " << sum.points
+    << "\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz"
+       "\nproperty float sigma_z_mm\nproperty int view\nproperty int round\nend_header\n";
+  std::filesystem::create_directories(file.parent_path());
+  write_file_durably(file, h.str() + body);
+  return sum;
+}
+
+}  // namespace scancell::daemon
