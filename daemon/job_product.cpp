@@ -1,11 +1,14 @@
 #include "daemon/job_product.hpp"
 
 #include <bit>
+#include <cmath>
+#include <map>
 #include <cstring>
 #include <sstream>
 
 #include "planner/reconstruction/measured_coverage.hpp"
 #include "planner/reconstruction/registration.hpp"
+#include "planner/reconstruction/surface_mesh.hpp"
 #include "planner/scan/range_image.hpp"
 
 namespace scancell::daemon {
@@ -23,7 +26,8 @@ void put(std::string& buf, T v) {
 
 }  // namespace
 
-CloudSummary write_job_cloud(Journal& journal, std::int64_t job, const sp::ModelSpec& spec, const std::filesystem::path& file) {
+CloudSummary write_job_cloud(Journal& journal, std::int64_t job, const sp::ModelSpec& spec, const std::filesystem::path& file,
+                             bool keep_samples) {
   static_assert(std::endian::native == std::endian::little, "cloud files are little-endian");
   CloudSummary sum;
   std::string body;
@@ -47,6 +51,10 @@ CloudSummary write_job_cloud(Journal& journal, std::int64_t job, const sp::Model
         put<std::int32_t>(body, s.view);
         put<std::int32_t>(body, round);
         ++sum.points;
+        if (keep_samples) {
+          sum.positions.push_back(p.cast<double>());
+          sum.normals.push_back(n);
+        }
       }
       ++sum.views;
     }
@@ -59,6 +67,24 @@ CloudSummary write_job_cloud(Journal& journal, std::int64_t job, const sp::Model
        "\nproperty float sigma_z_mm\nproperty int view\nproperty int round\nend_header\n";
   std::filesystem::create_directories(file.parent_path());
   write_file_durably(file, h.str() + body);
+  return sum;
+}
+
+ModelSummary write_job_model(const CloudSummary& cloud, const sp::ModelSpec& spec, const std::filesystem::path& file) {
+  sp::SurfaceMeshOptions o;
+  // Half the spec's sample spacing: the surface keeps what the specified density can resolve.
+  o.voxel_mm = 0.5 / std::sqrt(spec.density_per_mm2);
+  const sp::SurfaceMesh m = sp::mesh_from_oriented_points(cloud.positions, cloud.normals, o);
+  ModelSummary sum;
+  sum.vertices = m.mesh.vertices.size();
+  sum.triangles = m.mesh.triangles.size();
+  sum.voxel_mm = o.voxel_mm;
+  std::map<std::pair<std::uint32_t, std::uint32_t>, int> edges;
+  for (const auto& t : m.mesh.triangles)
+    for (int e = 0; e < 3; ++e) ++edges[std::minmax(t[e], t[(e + 1) % 3])];
+  for (const auto& [e, k] : edges) sum.boundary_edges += k == 1;
+  std::filesystem::create_directories(file.parent_path());
+  write_file_durably(file, sp::surface_ply(m));
   return sum;
 }
 

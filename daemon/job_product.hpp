@@ -4,6 +4,9 @@
 #include <cstdint>
 #include <filesystem>
 #include <string>
+#include <vector>
+
+#include <Eigen/Core>
 
 #include "daemon/journal.hpp"
 #include "planner/config.hpp"
@@ -13,6 +16,7 @@ namespace scancell::daemon {
 struct CloudSummary {
   std::size_t points = 0;  // spec-compliant samples written
   std::size_t views = 0;   // stored views they come from (the rough scan's and failed registrations excluded)
+  std::vector<Eigen::Vector3d> positions, normals;  // the samples written (object frame, mm), when asked for
 };
 
 /// `file` (jobs/<id>/cloud.ply): binary little-endian PLY, one vertex per sample that meets the spec
@@ -21,6 +25,16 @@ struct CloudSummary {
 /// neighbour is missing), sigma_z_mm, view (index within its round's plan), round. Written durably (a
 /// reader sees the previous file or the whole new one); rewritten after each round and at the end.
 CloudSummary write_job_cloud(Journal& journal, std::int64_t job, const planner::ModelSpec& spec,
-                             const std::filesystem::path& file);
+                             const std::filesystem::path& file, bool keep_samples = false);
+
+struct ModelSummary {
+  std::size_t vertices = 0, triangles = 0, boundary_edges = 0;  // boundary: edges of the holes left open
+  double voxel_mm = 0.0;
+};
+
+/// `file` (jobs/<id>/model.ply): the surface fused from the cloud's samples at a voxel of half the spec's
+/// sample spacing, 1/(2√ρ) (planner::mesh_from_oriented_points: OpenVDB sparse field, VolumeToMesh), open
+/// where nothing was measured; per-vertex `support`. Written durably.
+ModelSummary write_job_model(const CloudSummary& cloud, const planner::ModelSpec& spec, const std::filesystem::path& file);
 
 }  // namespace scancell::daemon

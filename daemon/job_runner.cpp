@@ -266,11 +266,17 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
   if (views > 0) {
     const auto cloud = settings_.jobs_dir / std::to_string(j.id) / "cloud.ply";
     try {
-      const CloudSummary c = write_job_cloud(journal_, j.id, j.spec, cloud);
+      const CloudSummary c = write_job_cloud(journal_, j.id, j.spec, cloud, true);
       result["cloud"] = cloud.string();
       result["cloud_points"] = c.points;
+      const auto model = cloud.parent_path() / "model.ply";
+      const ModelSummary m = write_job_model(c, j.spec, model);
+      result["model"] = model.string();
+      result["model_triangles"] = m.triangles;
+      result["model_open_edges"] = m.boundary_edges;
+      result["model_voxel_mm"] = m.voxel_mm;
     } catch (const std::exception& e) {
-      result["cloud_error"] = e.what();
+      result["product_error"] = e.what();
     }
   }
   result["views"] = views;
