@@ -6,6 +6,7 @@
 #include <cstring>
 #include <sstream>
 
+#include "common/binary.hpp"
 #include "planner/reconstruction/measured_coverage.hpp"
 #include "planner/reconstruction/registration.hpp"
 #include "planner/reconstruction/surface_mesh.hpp"
@@ -14,17 +15,6 @@
 namespace scancell::daemon {
 
 namespace sp = scancell::planner;
-
-namespace {
-
-template <class T>
-void put(std::string& buf, T v) {
-  char b[sizeof(T)];
-  std::memcpy(b, &v, sizeof(T));
-  buf.append(b, sizeof(T));
-}
-
-}  // namespace
 
 CloudSummary write_job_cloud(Journal& journal, std::int64_t job, const sp::ModelSpec& spec, const std::filesystem::path& file,
                              bool keep_samples) {
@@ -45,11 +35,11 @@ CloudSummary write_job_cloud(Journal& journal, std::int64_t job, const sp::Model
         if (!ok[q]) continue;
         const auto& p = img.samples[q].object_mm;
         const Eigen::Vector3d& n = smp.normals[at];
-        for (int c = 0; c < 3; ++c) put<float>(body, p[c]);
-        for (int c = 0; c < 3; ++c) put<float>(body, static_cast<float>(n[c]));
-        put<float>(body, img.samples[q].sigma_z_mm);
-        put<std::int32_t>(body, s.view);
-        put<std::int32_t>(body, round);
+        for (int c = 0; c < 3; ++c) scancell::append_binary<float>(body, p[c]);
+        for (int c = 0; c < 3; ++c) scancell::append_binary<float>(body, static_cast<float>(n[c]));
+        scancell::append_binary<float>(body, img.samples[q].sigma_z_mm);
+        scancell::append_binary<std::int32_t>(body, s.view);
+        scancell::append_binary<std::int32_t>(body, round);
         ++sum.points;
         if (keep_samples) {
           sum.positions.push_back(p.cast<double>());

@@ -10,20 +10,10 @@
 #include <mutex>
 #include <sstream>
 
+#include "common/binary.hpp"
 #include "planner/errors.hpp"
 
 namespace scancell::planner {
-
-namespace {
-
-template <class T>
-void put(std::string& buf, T v) {
-  char b[sizeof(T)];
-  std::memcpy(b, &v, sizeof(T));
-  buf.append(b, sizeof(T));
-}
-
-}  // namespace
 
 SurfaceMesh mesh_from_oriented_points(const std::vector<Eigen::Vector3d>& points, const std::vector<Eigen::Vector3d>& normals,
                                       const SurfaceMeshOptions& o) {
@@ -126,12 +116,12 @@ std::string surface_ply(const SurfaceMesh& s) {
     << "element face " << s.mesh.triangles.size() << "\nproperty list uchar int vertex_indices\nend_header\n";
   std::string buf = h.str();
   for (std::size_t i = 0; i < s.mesh.vertices.size(); ++i) {
-    for (int c = 0; c < 3; ++c) put<float>(buf, static_cast<float>(s.mesh.vertices[i][c]));
-    put<float>(buf, i < s.support.size() ? s.support[i] : 0.0f);
+    for (int c = 0; c < 3; ++c) scancell::append_binary<float>(buf, static_cast<float>(s.mesh.vertices[i][c]));
+    scancell::append_binary<float>(buf, i < s.support.size() ? s.support[i] : 0.0f);
   }
   for (const auto& t : s.mesh.triangles) {
-    put<std::uint8_t>(buf, 3);
-    for (int c = 0; c < 3; ++c) put<std::int32_t>(buf, static_cast<std::int32_t>(t[c]));
+    scancell::append_binary<std::uint8_t>(buf, 3);
+    for (int c = 0; c < 3; ++c) scancell::append_binary<std::int32_t>(buf, static_cast<std::int32_t>(t[c]));
   }
   return buf;
 }

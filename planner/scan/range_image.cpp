@@ -9,6 +9,7 @@
 #include <sstream>
 #include <string>
 
+#include "common/binary.hpp"
 #include "planner/errors.hpp"
 
 namespace scancell::planner {
@@ -53,12 +54,6 @@ constexpr const char* kProperties[] = {
 constexpr std::size_t kRecordBytes = 2 * 4 + 10 * 4 + 4;
 
 template <class T>
-void put(std::string& buf, T v) {
-  char b[sizeof(T)];
-  std::memcpy(b, &v, sizeof(T));
-  buf.append(b, sizeof(T));
-}
-template <class T>
 T take(const char*& p) {
   T v;
   std::memcpy(&v, p, sizeof(T));
@@ -97,12 +92,12 @@ std::string range_image_to_ply(const RangeImage& img) {
       // Without simulation truth the true point repeats the measured one and the triangle is kNoTriangle.
       const std::size_t at = static_cast<std::size_t>(j) * img.columns + i;
       const SampleTruth t = img.truth.empty() ? SampleTruth{s.object_mm, kNoTriangle} : img.truth[at];
-      put<std::int32_t>(buf, i);
-      put<std::int32_t>(buf, j);
+      scancell::append_binary<std::int32_t>(buf, i);
+      scancell::append_binary<std::int32_t>(buf, j);
       for (const auto* v : {&s.object_mm, &s.camera_mm, &t.object_mm})
-        for (int k = 0; k < 3; ++k) put<float>(buf, (*v)[k]);
-      put<float>(buf, s.sigma_z_mm);
-      put<std::uint32_t>(buf, t.triangle);
+        for (int k = 0; k < 3; ++k) scancell::append_binary<float>(buf, (*v)[k]);
+      scancell::append_binary<float>(buf, s.sigma_z_mm);
+      scancell::append_binary<std::uint32_t>(buf, t.triangle);
     }
   return buf;
 }
