@@ -89,10 +89,30 @@ Acquisition acquire_view(dr::Positioner& positioner, ScanHead& head, const sp::C
   bool with_truth = false;  // a simulated scanner's ground truth, carried beside the samples
   const Eigen::Isometry3d object_to_view = img.pose.camera_to_object.inverse();
   img.acquired_rows.assign(static_cast<std::size_t>(n_rows), 0);
+  // Profiles are matched to rows by their pulse number, not by arrival: profile base + k answers the k-th
+  // pulse of this sweep. A late profile of an earlier sweep is skipped; one lost on the wire leaves its row
+  // unacquired, in its place.
+  const std::uint64_t base = head.pulses;
+  head.pulses += fired_rows.size();
   int delivered = 0;
-  for (std::size_t k = 0; k < fired_rows.size(); ++k) {
-    const dr::Profile prof = head.scanner().acquire(std::chrono::milliseconds(2000));
-    // Fired but never delivered (a frame lost on the network): the row stays unacquired, in its place.
+  for (std::size_t next = 0; next < fired_rows.size();) {
+    dr::Profile prof;
+    try {
+      prof = head.scanner().acquire(std::chrono::milliseconds(2000));
+    } catch (const dr::DriverError& e) {
+      // The sweep's last frame lost on the wire leaves no later frame to count its profiles: what arrived
+      // stands and the rest are lost profiles (counted in lost_profiles). Nothing at all from the sweep is a
+      // fault (trigger, cable).
+      if (e.kind != dr::DriverError::Kind::timeout || next == 0) throw;
+      break;
+    }
+    if (prof.index < base) continue;
+    const std::size_t k = static_cast<std::size_t>(prof.index - base);
+    if (k >= fired_rows.size() || k < next)
+      throw dr::DriverError(dr::DriverError::Kind::protocol, "scanner", "profile " + std::to_string(prof.index),
+                            "out of order: this sweep fired pulses " + std::to_string(base) + " to " +
+                                std::to_string(base + fired_rows.size() - 1) + ", the next expected is " + std::to_string(base + next));
+    next = k + 1;
     if (prof.lost) continue;
     img.acquired_rows[static_cast<std::size_t>(fired_rows[k])] = 1;
     ++delivered;

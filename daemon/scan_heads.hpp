@@ -31,6 +31,9 @@ class ScanHead {
   /// A positioning move has ended (the sweep of a scan is not one): a simulated positioner draws its next
   /// repeatability error here.
   virtual void moved() {}
+  /// Trigger pulses fired through this head so far (acquire_view counts them): the scanner numbers its
+  /// profiles by pulse from 0, so profile i answers pulse i, whatever was lost or late in between.
+  std::uint64_t pulses = 0;
 };
 
 /// Builds the head for a job. `scene_mm` is what is on the table in the object frame (the job's ground-truth

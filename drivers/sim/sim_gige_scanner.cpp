@@ -127,8 +127,10 @@ struct SimGigeScanner::Impl {
         frames.push_back(std::move(f));
         armed = true;
       }
-      // The emulator sends a frame when its trigger register is set (its "software" source is our Line0).
-      if (armed || !frames.empty()) arv_fake_camera_write_register(cam, ARV_FAKE_CAMERA_REGISTER_TRIGGER_SOFTWARE, 1);
+      // The emulator sends a frame when its trigger register is set (its "software" source is our Line0):
+      // set here for a new frame, and by fill() while frames remain. Never otherwise: an extra set would
+      // send a frame of padding lines.
+      if (armed) arv_fake_camera_write_register(cam, ARV_FAKE_CAMERA_REGISTER_TRIGGER_SOFTWARE, 1);
     }
   }
 
