@@ -95,7 +95,7 @@ Acquisition acquire_view(dr::Positioner& positioner, ScanHead& head, const sp::C
   const std::uint64_t base = head.pulses;
   head.pulses += fired_rows.size();
   int delivered = 0;
-  for (std::size_t next = 0; next < fired_rows.size();) {
+  for (std::size_t expect = 0; expect < fired_rows.size();) {
     dr::Profile prof;
     try {
       prof = head.scanner().acquire(std::chrono::milliseconds(2000));
@@ -103,16 +103,16 @@ Acquisition acquire_view(dr::Positioner& positioner, ScanHead& head, const sp::C
       // The sweep's last frame lost on the wire leaves no later frame to count its profiles: what arrived
       // stands and the rest are lost profiles (counted in lost_profiles). Nothing at all from the sweep is a
       // fault (trigger, cable).
-      if (e.kind != dr::DriverError::Kind::timeout || next == 0) throw;
+      if (e.kind != dr::DriverError::Kind::timeout || expect == 0) throw;
       break;
     }
     if (prof.index < base) continue;
     const std::size_t k = static_cast<std::size_t>(prof.index - base);
-    if (k >= fired_rows.size() || k < next)
+    if (k >= fired_rows.size() || k < expect)
       throw dr::DriverError(dr::DriverError::Kind::protocol, "scanner", "profile " + std::to_string(prof.index),
                             "out of order: this sweep fired pulses " + std::to_string(base) + " to " +
-                                std::to_string(base + fired_rows.size() - 1) + ", the next expected is " + std::to_string(base + next));
-    next = k + 1;
+                                std::to_string(base + fired_rows.size() - 1) + ", the next expected is " + std::to_string(base + expect));
+    expect = k + 1;
     if (prof.lost) continue;
     img.acquired_rows[static_cast<std::size_t>(fired_rows[k])] = 1;
     ++delivered;

@@ -18,7 +18,6 @@ namespace sp = scancell::planner;
 
 CloudSummary write_job_cloud(Journal& journal, std::int64_t job, const sp::ModelSpec& spec, const std::filesystem::path& file,
                              bool keep_samples) {
-  static_assert(std::endian::native == std::endian::little, "cloud files are little-endian");
   CloudSummary sum;
   std::string body;
   for (const auto& [plan, round] : journal.plan_rounds(job)) {

@@ -163,7 +163,6 @@ sp::TriangleMesh load_object(const std::string& path, double fit_mm, const std::
 
 }  // namespace
 
-
 json JobRequest::to_json() const {
   json j = {{"mesh", mesh}};
   if (fit_mm > 0.0) j["fit_mm"] = fit_mm;
@@ -357,8 +356,7 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
     const sp::TriangleMesh& fine = j.truth_object;
     double ss = 0.0, ssn = 0.0;
     std::size_t n = 0, nn = 0, off = 0;
-    for (std::size_t v = 0; v < images.size(); ++v) {
-      auto img = images[v];
+    for (auto img : images) {
       // The samples the daemon counted as compliant, as it counted them (their density from the stored,
       // noisy positions), moved to where they really are.
       std::vector<std::uint8_t> compliant = sp::MeasuredCoverage::compliant_samples(img, j.spec);

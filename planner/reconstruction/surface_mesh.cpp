@@ -109,7 +109,6 @@ SurfaceMesh mesh_from_oriented_points(const std::vector<Eigen::Vector3d>& points
 }
 
 std::string surface_ply(const SurfaceMesh& s) {
-  static_assert(std::endian::native == std::endian::little, "model files are little-endian");
   std::ostringstream h;
   h << "ply\nformat binary_little_endian 1.0\ncomment scancell surface model 1 (mm; support: summed sample weight)\n"
     << "element vertex " << s.mesh.vertices.size() << "\nproperty float x\nproperty float y\nproperty float z\nproperty float support\n"
