@@ -12,8 +12,13 @@ all: build
 deps:
 	@bash scripts/deps.sh
 
+# Debug information: line tables only (-g1) by default. Stack traces, ASan reports and perf keep file:line;
+# the full -g (local variables) made the OpenVDB, FCL and KDL translation units ~40 % slower to compile and
+# CI longer than its 40-minute budget. `make build DEBUG_INFO=-g` for a debugging session.
+DEBUG_INFO ?= -g1
+
 build: deps
-	@$(CMAKE) -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo > $(BUILD).configure.log 2>&1 || (cat $(BUILD).configure.log; exit 1)
+	@$(CMAKE) -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O2 $(DEBUG_INFO) -DNDEBUG" > $(BUILD).configure.log 2>&1 || (cat $(BUILD).configure.log; exit 1)
 	@$(CMAKE) --build $(BUILD) -j$(JOBS)
 
 # All tests in the optimised build, then the planner and driver tests again under ASan+UBSan (-O1 keeps it quick;
@@ -27,11 +32,17 @@ kill-test: build
 	tests/daemon/kill_loop.sh $(BUILD) 50
 
 test-asan: deps
-	@$(CMAKE) -S . -B $(ASAN_BUILD) -DCMAKE_BUILD_TYPE=Debug "-DCMAKE_CXX_FLAGS_DEBUG=-O1 -g" -DSCANCELL_SANITIZE=ON -DSCANCELL_BUILD_BENCH=OFF > $(ASAN_BUILD).configure.log 2>&1 || (cat $(ASAN_BUILD).configure.log; exit 1)
+	@$(CMAKE) -S . -B $(ASAN_BUILD) -DCMAKE_BUILD_TYPE=Debug "-DCMAKE_CXX_FLAGS_DEBUG=-O1 $(DEBUG_INFO)" -DSCANCELL_SANITIZE=ON -DSCANCELL_BUILD_BENCH=OFF > $(ASAN_BUILD).configure.log 2>&1 || (cat $(ASAN_BUILD).configure.log; exit 1)
 	@$(CMAKE) --build $(ASAN_BUILD) -j$(JOBS) --target planner_tests driver_tests daemon_tests calibration_tests \
 	  genicam_tests fuzz_mesh fuzz_range_image fuzz_plan_file fuzz_config fuzz_control
 	LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp UBSAN_OPTIONS=print_stacktrace=1 \
-	  ctest --test-dir $(ASAN_BUILD) --output-on-failure -j$(JOBS) -L 'planner|drivers|daemon|calibration|fuzz'
+	  ctest --test-dir $(ASAN_BUILD) --output-on-failure -j$(JOBS) -L 'planner|drivers|daemon|calibration|fuzz' -E '$(ASAN_SKIP)'
+
+# Run in the optimised build only: two tests that take over 2 min each under ASan (a fifth of its test time)
+# and whose code runs under ASan in smaller tests: registration under pose error (Registration.*, the cube
+# and bounding-box jobs register every view) and fusion of thin shapes (Fusion.SphereComesBack…,
+# Fusion.Hypothetical…, the bounding-box job's rough model).
+ASAN_SKIP = ^(SimCell.RegistrationPutsSamplesWhereTheyReallyAreUnderPoseError|Fusion.ThinAndConcaveShapesStayManifoldAndDecimateWithoutLosingFaces)$$
 
 # Open-ended fuzzing (not in CI): every target under libFuzzer with ASan+UBSan (clang), FUZZ_SECONDS each
 # (default 60), starting from the committed corpus and reproducers; new inputs land in build-fuzz/corpus/.

@@ -2,7 +2,6 @@
 
 #include <bit>
 #include <cmath>
-#include <map>
 #include <cstring>
 #include <sstream>
 
@@ -16,37 +15,45 @@ namespace scancell::daemon {
 
 namespace sp = scancell::planner;
 
-CloudSummary write_job_cloud(Journal& journal, std::int64_t job, const sp::ModelSpec& spec, const std::filesystem::path& file,
-                             bool keep_samples) {
-  CloudSummary sum;
-  std::string body;
+std::vector<StoredView> load_job_views(Journal& journal, std::int64_t job) {
+  std::vector<StoredView> out;
   for (const auto& [plan, round] : journal.plan_rounds(job)) {
     if (round < 0) continue;  // the rough scan: table frame, exploration only
     for (const auto& s : journal.scans(plan)) {
       if (!s.note.empty()) continue;  // does not count (its registration failed)
-      const sp::RangeImage img = sp::range_image_from_ply(journal.read_scan(s), s.file);
-      const std::vector<std::uint8_t> ok = sp::MeasuredCoverage::compliant_samples(img, spec);
-      const sp::ScanSamples smp = sp::scan_samples(img);  // valid samples in sample order, with normals
-      std::size_t k = 0;
-      for (std::size_t q = 0; q < img.samples.size(); ++q) {
-        if (!img.samples[q].valid()) continue;
-        const std::size_t at = k++;
-        if (!ok[q]) continue;
-        const auto& p = img.samples[q].object_mm;
-        const Eigen::Vector3d& n = smp.normals[at];
-        for (int c = 0; c < 3; ++c) scancell::append_binary<float>(body, p[c]);
-        for (int c = 0; c < 3; ++c) scancell::append_binary<float>(body, static_cast<float>(n[c]));
-        scancell::append_binary<float>(body, img.samples[q].sigma_z_mm);
-        scancell::append_binary<std::int32_t>(body, s.view);
-        scancell::append_binary<std::int32_t>(body, round);
-        ++sum.points;
-        if (keep_samples) {
-          sum.positions.push_back(p.cast<double>());
-          sum.normals.push_back(n);
-        }
-      }
-      ++sum.views;
+      out.push_back({sp::range_image_from_ply(journal.read_scan(s), s.file), s.view, round});
     }
+  }
+  return out;
+}
+
+CloudSummary write_job_cloud(const std::vector<StoredView>& views, std::int64_t job, const sp::ModelSpec& spec,
+                             const std::filesystem::path& file, bool keep_samples) {
+  CloudSummary sum;
+  std::string body;
+  for (const StoredView& v : views) {
+    const sp::RangeImage& img = v.image;
+    const std::vector<std::uint8_t> ok = sp::MeasuredCoverage::compliant_samples(img, spec);
+    const sp::ScanSamples smp = sp::scan_samples(img);  // valid samples in sample order, with normals
+    std::size_t k = 0;
+    for (std::size_t q = 0; q < img.samples.size(); ++q) {
+      if (!img.samples[q].valid()) continue;
+      const std::size_t at = k++;
+      if (!ok[q]) continue;
+      const auto& p = img.samples[q].object_mm;
+      const Eigen::Vector3d& n = smp.normals[at];
+      for (int c = 0; c < 3; ++c) scancell::append_binary<float>(body, p[c]);
+      for (int c = 0; c < 3; ++c) scancell::append_binary<float>(body, static_cast<float>(n[c]));
+      scancell::append_binary<float>(body, img.samples[q].sigma_z_mm);
+      scancell::append_binary<std::int32_t>(body, v.view);
+      scancell::append_binary<std::int32_t>(body, v.round);
+      ++sum.points;
+      if (keep_samples) {
+        sum.positions.push_back(p.cast<double>());
+        sum.normals.push_back(n);
+      }
+    }
+    ++sum.views;
   }
   std::ostringstream h;
   h << "ply\nformat binary_little_endian 1.0\ncomment scancell registered cloud 1\ncomment job " << job
@@ -68,10 +75,7 @@ ModelSummary write_job_model(const CloudSummary& cloud, const sp::ModelSpec& spe
   sum.vertices = m.mesh.vertices.size();
   sum.triangles = m.mesh.triangles.size();
   sum.voxel_mm = o.voxel_mm;
-  std::map<std::pair<std::uint32_t, std::uint32_t>, int> edges;
-  for (const auto& t : m.mesh.triangles)
-    for (int e = 0; e < 3; ++e) ++edges[std::minmax(t[e], t[(e + 1) % 3])];
-  for (const auto& [e, k] : edges) sum.boundary_edges += k == 1;
+  sum.boundary_edges = sp::count_edges(m.mesh).open;
   std::filesystem::create_directories(file.parent_path());
   write_file_durably(file, sp::surface_ply(m));
   return sum;

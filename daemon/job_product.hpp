@@ -10,6 +10,7 @@
 
 #include "daemon/journal.hpp"
 #include "planner/config.hpp"
+#include "planner/scan/range_image.hpp"
 
 namespace scancell::daemon {
 
@@ -19,12 +20,21 @@ struct CloudSummary {
   std::vector<Eigen::Vector3d> positions, normals;  // the samples written (object frame, mm), when asked for
 };
 
+/// A stored view of the job's plan rounds that counts (its registration did not fail), as read back.
+struct StoredView {
+  planner::RangeImage image;
+  int view = 0, round = 0;  // index within its round's plan; round (0, 1, ...)
+};
+
+/// Every counting view of `job`'s plan rounds (not the rough scan's), in round and view order.
+std::vector<StoredView> load_job_views(Journal& journal, std::int64_t job);
+
 /// `file` (jobs/<id>/cloud.ply): binary little-endian PLY, one vertex per sample that meets the spec
 /// (σz ≤ precision, local density ≥ density, thesis eq. 3.4/3.8) in the object frame, as registered and
 /// stored: x y z (mm), nx ny nz (unit normal from its image neighbours, towards the scanner; 0 0 0 where a
 /// neighbour is missing), sigma_z_mm, view (index within its round's plan), round. Written durably (a
 /// reader sees the previous file or the whole new one); rewritten after each round and at the end.
-CloudSummary write_job_cloud(Journal& journal, std::int64_t job, const planner::ModelSpec& spec,
+CloudSummary write_job_cloud(const std::vector<StoredView>& views, std::int64_t job, const planner::ModelSpec& spec,
                              const std::filesystem::path& file, bool keep_samples = false);
 
 struct ModelSummary {

@@ -12,6 +12,7 @@
 
 #include "planner/errors.hpp"
 #include "planner/geometry/mesh.hpp"
+#include "planner/placement.hpp"
 #include "planner/kinematics/pose_error.hpp"
 #include "planner/geometry/surface_distance.hpp"
 #include "planner/sim/verify.hpp"
@@ -171,6 +172,7 @@ json JobRequest::to_json() const {
   if (!truth.empty()) j["truth"] = truth;
   if (rough_vertices) j["rough_vertices"] = *rough_vertices;
   if (bbox_mm) j["bbox_mm"] = {bbox_mm->x(), bbox_mm->y(), bbox_mm->z()};
+  if (!placement.empty()) j["placement"] = placement;
   return j;
 }
 
@@ -187,6 +189,7 @@ JobRequest JobRequest::from_json(const json& j) {
   r.settings = j.value("settings", std::string());
   r.truth = j.value("truth", std::string());
   if (j.contains("rough_vertices")) r.rough_vertices = j["rough_vertices"].get<std::size_t>();
+  r.placement = j.value("placement", std::string());
   return r;
 }
 
@@ -199,6 +202,10 @@ void validate_request(const JobRequest& r, const std::atomic<int>* cancel) {
   if (!(r.fit_mm >= 0.0) || !std::isfinite(r.fit_mm)) throw std::invalid_argument("submit: 'fit_mm' must be > 0");
   if (!r.bbox_mm && r.rough_vertices && (*r.rough_vertices < 50 || *r.rough_vertices > 200000))
     throw std::invalid_argument("submit: 'rough_vertices' must be in [50, 200000]");
+  if (!r.placement.empty() && r.placement != "auto" && r.placement != "as_given")
+    throw std::invalid_argument("submit: 'placement' must be auto or as_given");
+  if (r.bbox_mm && r.placement == "auto")
+    throw std::invalid_argument("submit: 'placement' auto needs a mesh; a bounding-box job's object already stands on the table");
   if (!r.mesh.empty()) load_object(r.mesh, r.fit_mm, cancel);
   if (!r.truth.empty()) load_object(r.truth, r.fit_mm, cancel);
   if (!r.spec.empty()) sp::load_spec(r.spec);
@@ -219,6 +226,7 @@ struct JobRunner::Job {
   sp::CellModel cell;               // with the object's placement on the table
   sp::TriangleMesh truth_table;     // simulation, bounding-box jobs: the object as it stands on the table
   json rough_quality;               // simulation, bounding-box jobs: the fused rough model against the truth
+  json placement;                   // the resting-pose choice of round 0, when placement was auto
   sp::TriangleMesh truth_object;    // simulation: the object on the table, in the plan's object frame
   std::vector<std::uint32_t> unmeasurable;  // rows no candidate of the first plan measures
   Progress progress;
@@ -253,19 +261,16 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
                  {"measured_coverage", j.progress.measured},
                  {"estimated_coverage", j.estimated_total}};
   int views = 0;
-  std::vector<sp::RangeImage> images;
   for (const auto& [plan, round] : journal_.plan_rounds(j.id))
-    for (const auto& s : journal_.scans(plan)) {
-      if (round < 0) continue;  // the rough scan's images are in the table frame and far out
-      ++views;
-      if (state != JobState::aborted && s.note.empty()) images.push_back(sp::range_image_from_ply(journal_.read_scan(s), s.file));
-    }
+    if (round >= 0) views += static_cast<int>(journal_.scans(plan).size());  // the rough scan's are not views
+  // The stored views that count, read once: for the product and, in simulation, the ground-truth checks.
+  std::vector<StoredView> stored = load_job_views(journal_, j.id);
   // The job's product: every spec-compliant registered sample, whatever the end (an aborted job keeps what
   // it measured). A failure to write it is reported in the result, not hidden, and does not undo the job.
   if (views > 0) {
     const auto cloud = settings_.jobs_dir / std::to_string(j.id) / "cloud.ply";
     try {
-      const CloudSummary c = write_job_cloud(journal_, j.id, j.spec, cloud, true);
+      const CloudSummary c = write_job_cloud(stored, j.id, j.spec, cloud, true);
       result["cloud"] = cloud.string();
       result["cloud_points"] = c.points;
       const auto model = cloud.parent_path() / "model.ply";
@@ -278,8 +283,21 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
       result["product_error"] = e.what();
     }
   }
+  std::vector<sp::RangeImage> images;
+  if (state != JobState::aborted)
+    for (auto& v : stored) images.push_back(std::move(v.image));
+  stored.clear();
   result["views"] = views;
   if (!j.rough_quality.is_null()) result["rough_model"] = j.rough_quality;
+  if (!j.placement.is_null()) {
+    // How the operator is to place the object (the simulated cell placed it so): the chosen pose's rotation
+    // and why, with every option's figures in the round-0 plan info.
+    const json& chosen = j.placement.at("options").at(j.placement.at("chosen").get<int>() - 1);
+    result["placement"] = {{"reason", j.placement.at("reason")},
+                           {"resting_pose", chosen.at("resting_pose")},
+                           {"object_to_table_row_major", chosen.at("object_to_table_row_major")},
+                           {"options", j.placement.at("options").size()}};
+  }
   if (j.rough && j.coverage) {
     const std::vector<std::uint32_t> rows = j.coverage->unmeasured_rows();
     const RowTally t = tally_unmeasured(*j.rough, rows, j.unmeasurable);
@@ -423,6 +441,8 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
     j.spec = j.request.spec.empty() ? models_.spec : sp::load_spec(j.request.spec);
     j.settings = j.request.settings.empty() ? models_.settings : sp::load_planner_settings(j.request.settings);
     if (j.request.rough_vertices) j.rough_options.target_vertices = *j.request.rough_vertices;
+    if (!j.request.placement.empty()) j.settings.placement.automatic = j.request.placement == "auto";
+    if (j.request.bbox_mm) j.settings.placement.automatic = false;  // it already stands on the table
     j.rough_options.seed = j.settings.seed;
     if (!j.request.bbox_mm) j.object = load_object(j.request.mesh, j.request.fit_mm);
     else if (j.request.truth.empty()) throw sp::DataError("a bounding-box job needs 'truth' in simulation: what stands on the table");
@@ -445,6 +465,9 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
     if (plans.empty()) {
       transition(j, JobState::planning);
       sp::ViewPlan p = plan_or_stop([&] {
+        if (j.settings.placement.automatic)
+          return sp::plan_with_placement(j.object, models_.sensor, j.spec, j.settings, j.rough_options,
+                                         settings_.planner_threads, models_.cell, &stop);
         return sp::plan_views(j.object, models_.sensor, j.spec, j.settings, j.rough_options, settings_.planner_threads,
                               &models_.cell, nullptr, nullptr, &stop);
       }, stop);
@@ -452,7 +475,7 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
       j.unmeasurable = p.cover.unmeasurable_rows;
       const std::vector<std::string> poses = view_records(p);
       const double est = p.cover.cumulative_fraction.empty() ? 0.0 : p.cover.cumulative_fraction.back();
-      const json info = {{"round", 0},
+      json info = {{"round", 0},
                          {"rows", p.rough.size()},
                          {"object_on_table", matrix_json(p.cell->object_on_table.matrix())},
                          {"estimated", est},
@@ -462,6 +485,10 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
                          {"predicted_rows", p.predicted_rows},
                          {"predicted_gain_mm2", p.predicted_gain_mm2},
                          {"plan_s", p.times.total_s()}};
+      if (p.placement) {
+        info["placement"] = sp::placement_to_json(*p.placement);
+        journal_.event(id, "placement: " + p.placement->reason);
+      }
       if (p.views.empty()) {
         j.cell = *p.cell;
         j.coverage = std::make_unique<sp::MeasuredCoverage>(*j.rough, j.spec, settings_.coverage);
@@ -476,6 +503,7 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
     j.cell = models_.cell;
     j.cell.object_on_table = isometry_from(info0.at("object_on_table"), "plan info object_on_table");
     j.unmeasurable = info0.at("unmeasurable_rows").get<std::vector<std::uint32_t>>();
+    if (info0.contains("placement")) j.placement = info0.at("placement");
     if (!j.rough) j.rough = sp::build_rough_model(j.object, j.rough_options);
     if (j.rough->size() != info0.at("rows").get<std::size_t>())
       throw sp::DataError("job " + std::to_string(id) + ": the rough model now has " + std::to_string(j.rough->size()) +
@@ -543,7 +571,8 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
       transition(j, JobState::verifying);
       {
         // Kept current after each round: the registered cloud so far (durable, like the scans).
-        const CloudSummary c = write_job_cloud(journal_, id, j.spec, settings_.jobs_dir / std::to_string(id) / "cloud.ply");
+        const CloudSummary c =
+            write_job_cloud(load_job_views(journal_, id), id, j.spec, settings_.jobs_dir / std::to_string(id) / "cloud.ply");
         journal_.event(id, "round " + std::to_string(j.round) + ": cloud.ply holds " + std::to_string(c.points) +
                                " spec-compliant samples from " + std::to_string(c.views) + " views");
       }
@@ -623,8 +652,11 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
         else if (fails[r] > 0) weight_scale[r] = settings_.failed_row_weight;
       }
       sp::ViewPlan p = plan_or_stop([&] {
+        // The object rests as round 0 placed it (the configured or the chosen orientation).
+        sp::CellModel resting = models_.cell;
+        resting.object_on_table.linear() = j.cell.object_on_table.linear();
         return sp::plan_views(j.object, models_.sensor, j.spec, replan, j.rough_options, settings_.planner_threads,
-                              &models_.cell, &measured, &weight_scale, &stop);
+                              &resting, &measured, &weight_scale, &stop);
       }, stop);
       if (p.views.empty()) {
         finish(j, JobState::stalled, "replan adds nothing: " + summary);

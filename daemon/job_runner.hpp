@@ -80,6 +80,9 @@ struct JobRequest {
   /// Instead of a mesh: the object's approximate size (x, y, z mm), standing centred on the turntable. The
   /// job then starts with a rough scan and plans from the rough model it fuses.
   std::optional<Eigen::Vector3d> bbox_mm;
+  /// How the object rests on the plate: "auto" (plan its stable resting poses, keep the best; the operator
+  /// places it as the result says), "as_given", or empty for the settings' placement.mode.
+  std::string placement;
   nlohmann::json to_json() const;
   static JobRequest from_json(const nlohmann::json& j);
 };

@@ -193,6 +193,22 @@ PlannerSettings load_planner_settings(const std::filesystem::path& file) {
       c.fail(c.key_path("local_search_time_limit_s"), "must be in (0, 3600]");
     c.finish();
   }
+  if (y.has("placement")) {
+    Section s = y.section("placement");
+    auto& pl = p.placement;
+    using L = PlacementSettings;
+    const std::string mode = s.get_or<std::string>("mode", pl.automatic ? "auto" : "as_given");
+    if (mode == "auto") pl.automatic = true;
+    else if (mode == "as_given") pl.automatic = false;
+    else s.fail(s.key_path("mode"), "must be auto or as_given, got '" + mode + "'");
+    pl.candidates = s.ranged<int>("candidates", pl.candidates, static_cast<int>(L::candidates_limits.lo),
+                                  static_cast<int>(L::candidates_limits.hi));
+    pl.min_probability = s.ranged("min_probability", pl.min_probability, L::min_probability_limits.lo, L::min_probability_limits.hi);
+    pl.min_tip_angle_rad = s.ranged("min_tip_angle_rad", pl.min_tip_angle_rad, L::min_tip_angle_limits.lo, L::min_tip_angle_limits.hi);
+    pl.coverage_tolerance =
+        s.ranged("coverage_tolerance", pl.coverage_tolerance, L::coverage_tolerance_limits.lo, L::coverage_tolerance_limits.hi);
+    s.finish();
+  }
   if (y.has("matrix")) {
     Section m = y.section("matrix");
     p.matrix.ray_offset_mm = m.non_negative("ray_offset_mm", p.matrix.ray_offset_mm);

@@ -11,10 +11,26 @@
 
 namespace scancell::planner {
 
+/// placement: how the object rests on a turntable (planner/placement.hpp). Each limit is declared once here,
+/// for the YAML loader and validate(PlacementSettings).
+struct PlacementSettings {
+  struct Limits {
+    double lo, hi;
+  };
+  bool automatic = false;             // mode: auto (plan the stable resting poses, keep the best) | as_given
+  int candidates = 4;                 // most probable stable poses planned
+  double min_probability = 0.02;      // poses an object seldom settles in are not offered
+  double min_tip_angle_rad = 0.1745;  // marginal poses (a tilt of less than this topples them) are not offered
+  double coverage_tolerance = 0.005;  // estimated coverage within this (share of the area) is equal; fewer views win
+  static constexpr Limits candidates_limits{1, 24}, min_probability_limits{0, 1}, min_tip_angle_limits{0, 1.5},
+      coverage_tolerance_limits{0, 0.1};
+};
+
 struct PlannerSettings {
   ViewpointSettings viewpoints;
   CoverSettings cover;
   MatrixSettings matrix;
+  PlacementSettings placement;
   /// matrix.countermeasures: auto — size them from the cell's pose-error model (tables 7.3-7.5); needs a cell.
   bool countermeasures_from_cell = false;
   std::uint64_t seed = 1;

@@ -1,4 +1,5 @@
 #include "planner/plan.hpp"
+#include "planner/kinematics/resting_poses.hpp"
 
 #include "planner/core/cell_viewpoints.hpp"
 #include "planner/errors.hpp"
@@ -45,6 +46,42 @@ void improve_by_local_search(const MeasurabilityMatrix& m, const std::vector<dou
 
 }  // namespace
 
+nlohmann::json placement_to_json(const PlacementChoice& c) {
+  using nlohmann::json;
+  json options = json::array();
+  for (const auto& o : c.options) {
+    json rot = json::array();
+    for (int r = 0; r < 3; ++r)
+      for (int k = 0; k < 3; ++k) rot.push_back(o.object_to_table(r, k));
+    options.push_back({{"resting_pose", o.pose < 0 ? json(nullptr) : json(o.pose + 1)},
+                       {"as_given", o.as_given},
+                       {"object_to_table_row_major", rot},
+                       {"probability", o.probability},
+                       {"tip_angle_rad", o.tip_angle_rad},
+                       {"estimated_coverage", o.estimated_coverage},
+                       {"views", o.views},
+                       {"cell_time_s", o.cell_time_s},
+                       {"settles_in_pose", o.settles_on < 0 ? json(nullptr) : json(o.settles_on + 1)},
+                       {"settle_angle_rad", o.settle_angle_rad},
+                       {"plan_time_s", o.plan_s}});
+  }
+  json poses = json::array();
+  for (const auto& r : c.rest.poses)
+    poses.push_back({{"down_object", {r.down_object.x(), r.down_object.y(), r.down_object.z()}},
+                     {"probability", r.probability},
+                     {"tip_angle_rad", r.tip_angle_rad},
+                     {"margin_mm", r.margin_mm},
+                     {"com_height_mm", r.com_height_mm},
+                     {"support_area_mm2", r.support_area_mm2}});
+  return {{"chosen", c.chosen + 1},
+          {"reason", c.reason},
+          {"centre_of_mass_mm", {c.rest.centre_of_mass.x(), c.rest.centre_of_mass.y(), c.rest.centre_of_mass.z()}},
+          {"centre_of_mass_of", c.rest.solid ? "volume" : "surface"},
+          {"hull_faces", c.rest.hull_faces},
+          {"resting_poses", poses},
+          {"options", options}};
+}
+
 ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const ModelSpec& spec,
                     const PlannerSettings& settings_in, const RoughModelOptions& rough_options, int threads,
                     const CellModel* cell_in, const std::vector<std::uint8_t>* measured_rows,
@@ -62,14 +99,12 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     settings.matrix.countermeasures = countermeasures_for(sensor, cell_in->pose_error, settings.viewpoints.standoff_factor);
   }
   if (cell_in) {
-    // The object sits on the plate: its bounding box centred on the turntable axis, its lowest point on the
-    // table top, then the cell's configured offset.
-    Eigen::AlignedBox3d box;
-    for (const auto& v : object_mm.vertices) box.extend(v);
-    Eigen::Isometry3d place = Eigen::Isometry3d::Identity();
-    place.translation() = Eigen::Vector3d(-box.center().x(), -box.center().y(), -box.min().z());
+    // The object rests on the plate in the cell's configured orientation (object_rpy_rad, or the resting pose
+    // a placement choice put there): its rotated bounding box centred on the turntable axis, its lowest point
+    // on the table top, then the configured offset.
     p.cell = *cell_in;
-    p.cell->object_on_table = cell_in->object_on_table * place;
+    p.cell->object_on_table =
+        place_on_plate(object_mm, cell_in->object_on_table.linear(), cell_in->object_on_table.translation());
   }
   p.sensor = sensor;
   p.spec = spec;
@@ -501,6 +536,7 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
                             {"travel_time_s", p.cell_report.travel_s},
                             {"scan_time_s", p.cell_report.scan_s},
                             {"total_time_s", p.cell_report.travel_s + p.cell_report.scan_s}};
+    if (p.placement) j["summary"]["placement"] = placement_to_json(*p.placement);
   }
   if (p.local_search.start_views > 0) {
     const LocalSearchReport& ls = p.local_search;
@@ -557,18 +593,33 @@ std::string plan_summary(const ViewPlan& p) {
                   v.twist_rad * 180.0 / std::numbers::pi, p.cover.gain_weight[k], p.cover.cumulative_fraction[k]);
     os << buf;
   }
+  // The stop reason is free text of any length (a fixed buffer cut it and the newline off): streamed.
   std::snprintf(buf, sizeof buf,
                 "views: %zu  estimated measurability: %.4f (area)  reachable: %.4f  unmeasurable rows: %zu  "
-                "registration: %s (%zu components, t_r %.2f)  stopped: %s\n",
+                "registration: %s (%zu components, t_r %.2f)  stopped: ",
                 p.views.size(), est, p.cover.measurable_fraction, p.cover.unmeasurable_rows.size(),
                 p.cover.registration_components <= 1 ? "connected" : "NOT connected", p.cover.registration_components,
-                p.settings.cover.registration_threshold, p.cover.stop_reason.c_str());
-  os << buf;
+                p.settings.cover.registration_threshold);
+  os << buf << p.cover.stop_reason << "\n";
   std::snprintf(buf, sizeof buf,
                 "times (s): rough %.3f  scene %.3f  viewpoints %.3f  matrix %.3f  cover %.3f  total %.3f  (%d threads)\n",
                 p.times.rough_model_s, p.times.scene_s, p.times.viewpoints_s, p.times.matrix_s, p.times.cover_s,
                 p.times.total_s(), p.threads);
   os << buf;
+  if (p.placement) {
+    const PlacementChoice& c = *p.placement;
+    os << "placement (" << c.rest.poses.size() << " stable resting poses, centre of mass of the "
+       << (c.rest.solid ? "volume" : "surface") << "):\n  option  pose  as_given  probability  tip_deg  est_coverage  views  cell_time_s\n";
+    for (std::size_t k = 0; k < c.options.size(); ++k) {
+      const auto& o = c.options[k];
+      std::snprintf(buf, sizeof buf, "  %s%5zu  %4s  %8s  %11.3f  %7.1f  %12.4f  %5zu  %11.1f\n",
+                    static_cast<int>(k) == c.chosen ? "*" : " ", k + 1, o.pose < 0 ? "-" : std::to_string(o.pose + 1).c_str(),
+                    o.as_given ? "yes" : "no", o.probability, o.tip_angle_rad * 180.0 / std::numbers::pi,
+                    o.estimated_coverage, o.views, o.cell_time_s);
+      os << buf;
+    }
+    os << "  chosen: " << c.reason << "\n";
+  }
   return os.str();
 }
 

@@ -11,6 +11,7 @@
 #include <optional>
 
 #include "planner/kinematics/cell.hpp"
+#include "planner/kinematics/resting_poses.hpp"
 #include "planner/core/cell_viewpoints.hpp"
 #include "planner/config.hpp"
 #include "planner/core/cover.hpp"
@@ -58,6 +59,7 @@ struct ViewPlan {
   ExactReport exact;        // filled when settings.cover.mode == exact
   LocalSearchReport local_search;  // filled when the local search ran (settings.cover.local_search_iterations)
   std::optional<CellModel> cell;  // the cell planned for, with the object's placement on the table
+  std::optional<PlacementChoice> placement;  // when the resting pose was chosen (planner/placement.hpp)
   CellGenerationReport cell_generation;  // cell-native candidates (cell_viewpoints.hpp), when the cell has them
   struct CellReport {
     std::size_t moved = 0, unreachable = 0, colliding = 0, duplicates = 0;
@@ -86,6 +88,9 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
 
 /// The documented plan file (docs/plan-format.md).
 nlohmann::json plan_to_json(const ViewPlan& plan);
+
+/// The placement choice as plan files and job results record it (docs/plan-format.md, summary.placement).
+nlohmann::json placement_to_json(const PlacementChoice& choice);
 
 /// A short table for people: views, estimated measurability, timings.
 std::string plan_summary(const ViewPlan& plan);

@@ -7,7 +7,7 @@ PKGS=(
   libeigen3-dev libembree-dev libassimp-dev libopenmesh-dev libtbb-dev
   libyaml-cpp-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev libpng-dev
-  coinor-libcbc-dev liborocos-kdl-dev libfcl-dev
+  coinor-libcbc-dev liborocos-kdl-dev libfcl-dev libqhull-dev
   libmodbus-dev mbpoll libgpiod-dev libsqlite3-dev zlib1g-dev
   liblcm-dev liblcm-bin iproute2 libsystemd-dev libcli11-dev libnanoflann-dev
   libaravis-dev libusb-1.0-0-dev libopenvdb-dev libboost-dev

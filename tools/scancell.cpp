@@ -17,6 +17,7 @@
 #include "calibration/results.hpp"
 #include "planner/errors.hpp"
 #include "planner/plan.hpp"
+#include "planner/placement.hpp"
 #include "planner/plan_file.hpp"
 #include "planner/sim/verify.hpp"
 
@@ -45,6 +46,9 @@ const char* kPlanUsage =
     "  --cell CELL.yaml          plan for this cell (config/cells): reachable, collision-free views with their\n"
     "                            axis targets, in the order of least travel\n"
     "  --calibration F[,F]       apply calibration result files (docs/calibration.md) to the sensor and cell\n"
+    "  --placement auto|as-given with --cell: auto plans the object's most probable stable resting poses on the\n"
+    "                            plate and keeps the one measuring the most area with the fewest views\n"
+    "                            (settings placement.*); as-given (default) keeps the mesh's +z up\n"
     "  --quiet                   no summary table\n";
 
 const char* kVerifyUsage =
@@ -126,7 +130,7 @@ int cmd_plan(int argc, char** argv) {
   const auto o = parse(argc, argv,
                        {"--mesh", "--sensor", "--spec", "--settings", "--out", "--scale", "--fit-mm", "--rough-vertices",
                         "--rho-rel", "--rough-noise-mm", "--seed", "--cover", "--threads", "--segments", "--cell",
-                        "--calibration"},
+                        "--calibration", "--placement"},
                        {"--quiet"});
   for (const char* k : {"--mesh", "--sensor", "--spec", "--out"})
     if (!o.count(k)) throw UsageError(std::string("missing ") + k);
@@ -142,6 +146,14 @@ int cmd_plan(int argc, char** argv) {
     else if (m == "exact") settings.cover.mode = sp::CoverMode::exact;
     else throw UsageError("--cover: '" + m + "' is not greedy, constrained or exact");
   }
+  if (o.count("--placement")) {
+    const std::string& m = o.at("--placement");
+    if (m == "auto") settings.placement.automatic = true;
+    else if (m == "as-given") settings.placement.automatic = false;
+    else throw UsageError("--placement: '" + m + "' is not auto or as-given");
+  }
+  if (settings.placement.automatic && !o.count("--cell"))
+    throw UsageError("placement auto chooses how the object rests on a turntable: it needs --cell");
   sp::RoughModelOptions rough;
   if (o.count("--rough-vertices")) rough.target_vertices = whole(o, "--rough-vertices");
   if (o.count("--rho-rel")) rough.rho_rel = number(o, "--rho-rel");
@@ -195,7 +207,9 @@ int cmd_plan(int argc, char** argv) {
         if (!o.count("--quiet")) std::cerr << "scancell: calibration " << f << ": " << change << "\n";
     }
   }
-  sp::ViewPlan plan = sp::plan_views(std::move(mesh), sensor, spec, settings, rough, threads, cell ? &*cell : nullptr);
+  sp::ViewPlan plan = settings.placement.automatic
+                          ? sp::plan_with_placement(mesh, sensor, spec, settings, rough, threads, *cell)
+                          : sp::plan_views(std::move(mesh), sensor, spec, settings, rough, threads, cell ? &*cell : nullptr);
   plan.object = source;
   if (plan.rough_report.faces_rejected_by_decimator)
     std::cerr << "scancell: decimator rejected " << plan.rough_report.faces_rejected_by_decimator << " non-manifold faces\n";

@@ -51,6 +51,14 @@ void apply_scale(TriangleMesh& mesh, double scale);
 
 double triangle_area(const TriangleMesh& mesh, const Triangle& t);
 
+/// How the triangles share their edges: `open` edges have one triangle (the rims of holes), `non_manifold` ones
+/// three or more. A closed, manifold mesh has neither.
+struct EdgeCounts {
+  std::size_t edges = 0, open = 0, non_manifold = 0;
+  bool closed() const { return open == 0 && non_manifold == 0; }
+};
+EdgeCounts count_edges(const TriangleMesh& mesh);
+
 /// Appends `more` to `into` (its triangles after into's, so ids below the old count stay into's).
 void append_mesh(TriangleMesh& into, const TriangleMesh& more);
 

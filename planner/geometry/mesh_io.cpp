@@ -369,6 +369,24 @@ double triangle_area(const TriangleMesh& mesh, const Triangle& t) {
 
 namespace scancell::planner {
 
+EdgeCounts count_edges(const TriangleMesh& mesh) {
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> e;
+  e.reserve(mesh.triangles.size() * 3);
+  for (const auto& t : mesh.triangles)
+    for (int k = 0; k < 3; ++k) e.push_back(std::minmax(t[k], t[(k + 1) % 3]));
+  std::sort(e.begin(), e.end());
+  EdgeCounts c;
+  for (std::size_t i = 0; i < e.size();) {
+    std::size_t j = i;
+    while (j < e.size() && e[j] == e[i]) ++j;
+    ++c.edges;
+    c.open += j - i == 1;
+    c.non_manifold += j - i > 2;
+    i = j;
+  }
+  return c;
+}
+
 void append_mesh(TriangleMesh& into, const TriangleMesh& more) {
   const auto base = static_cast<std::uint32_t>(into.vertices.size());
   into.vertices.insert(into.vertices.end(), more.vertices.begin(), more.vertices.end());

@@ -33,21 +33,25 @@ using ::testing::HasSubstr;
 
 std::string src(const std::string& rel) { return std::string(SCANCELL_SOURCE_DIR) + "/" + rel; }
 
-/// A closed 50 mm cube, edges split to 6 mm, written as OFF: its base sits on the turntable plate, so the
-/// planner knows the base (1/6 of the area) cannot be measured in this cell.
-std::string write_cube(const fs::path& dir) {
-  sp::TriangleMesh cube;
-  cube.vertices = {{0, 0, 0}, {50, 0, 0}, {50, 50, 0}, {0, 50, 0}, {0, 0, 50}, {50, 0, 50}, {50, 50, 50}, {0, 50, 50}};
-  cube.triangles = {{0, 2, 1}, {0, 3, 2}, {4, 5, 6}, {4, 6, 7}, {0, 1, 5}, {0, 5, 4},
-                    {1, 2, 6}, {1, 6, 5}, {2, 3, 7}, {2, 7, 6}, {3, 0, 4}, {3, 4, 7}};
-  const sp::TriangleMesh m = sp::refine_edges(cube, 6.0);
-  const fs::path path = dir / "cube.off";
+/// A closed box of `size` mm (corner at the origin), edges split to 6 mm, written as OFF.
+std::string write_box(const fs::path& dir, const Eigen::Vector3d& s, const std::string& name) {
+  sp::TriangleMesh box;
+  box.vertices = {{0, 0, 0}, {s.x(), 0, 0}, {s.x(), s.y(), 0}, {0, s.y(), 0},
+                  {0, 0, s.z()}, {s.x(), 0, s.z()}, {s.x(), s.y(), s.z()}, {0, s.y(), s.z()}};
+  box.triangles = {{0, 2, 1}, {0, 3, 2}, {4, 5, 6}, {4, 6, 7}, {0, 1, 5}, {0, 5, 4},
+                   {1, 2, 6}, {1, 6, 5}, {2, 3, 7}, {2, 7, 6}, {3, 0, 4}, {3, 4, 7}};
+  const sp::TriangleMesh m = sp::refine_edges(box, 6.0);
+  const fs::path path = dir / name;
   std::ofstream f(path);
   f << "OFF\n" << m.vertices.size() << ' ' << m.triangles.size() << " 0\n";
   for (const auto& v : m.vertices) f << v.x() << ' ' << v.y() << ' ' << v.z() << "\n";
   for (const auto& t : m.triangles) f << "3 " << t[0] << ' ' << t[1] << ' ' << t[2] << "\n";
   return path.string();
 }
+
+/// A closed 50 mm cube: its base sits on the turntable plate, so the planner knows the base (1/6 of the
+/// area) cannot be measured in this cell.
+std::string write_cube(const fs::path& dir) { return write_box(dir, Eigen::Vector3d(50, 50, 50), "cube.off"); }
 
 struct SimCell : ::testing::Test {
   fs::path dir;
@@ -471,6 +475,42 @@ TEST_F(SimCell, RegistrationPutsSamplesWhereTheyReallyAreUnderPoseError) {
   EXPECT_LT(v_without, m_without - 0.2);
   EXPECT_LT(rw["sample_normal_error_rms_mm"].get<double>(), 0.05);
   EXPECT_GT(ro["sample_normal_error_rms_mm"].get<double>(), 0.3);
+}
+
+TEST_F(SimCell, PlacementAutoStandsTheObjectSoTheCellMeasuresMore) {
+  // An 80 × 40 × 20 mm bar given lying flat: the plate would hide its 3200 mm² base, 29 % of its 11200 mm².
+  // With placement auto the job plans its four most probable resting poses (placement.candidates; the
+  // 40 × 20 ends come 5th and 6th), stands it on an 80 × 20 side (14 % hidden), the simulated cell places
+  // it so, and the verified m_v of the whole surface shows it.
+  JobRequest r;
+  r.mesh = write_box(dir, Eigen::Vector3d(80, 40, 20), "bar.off");
+  r.rough_vertices = 600;
+  r.placement = "auto";
+  validate_request(r);
+  const auto job = journal->create_job("bar", r.to_json().dump());
+  max_rounds = 2;
+  std::atomic<int> stop{0};
+  auto runner_ = runner();
+  const JobState end = runner_.run(job, stop);
+  ASSERT_TRUE(end == JobState::done || end == JobState::stalled) << journal->job(job).cause;
+  const auto result = nlohmann::json::parse(journal->job(job).result_json);
+  ASSERT_TRUE(result.contains("placement")) << result.dump();
+  const auto& rot = result["placement"]["object_to_table_row_major"];
+  // The object's y axis (its 40 mm width) is the table's vertical: the bar stands on an 80 × 20 side.
+  EXPECT_GT(std::abs(rot[7].get<double>()), 0.9999) << result["placement"].dump();
+  EXPECT_THAT(result["placement"]["reason"].get<std::string>(), HasSubstr("as given"));
+  const auto ev = journal->events(job);
+  EXPECT_TRUE(std::any_of(ev.begin(), ev.end(), [](const std::string& e) { return e.rfind("placement: ", 0) == 0; }));
+  std::cout << "placement auto: " << result["placement"]["reason"] << ", verified m_v " << result["verified_mv"] << "\n";
+  EXPECT_GT(result["verified_mv"].get<double>(), 1.0 - 1600.0 / 11200 - 0.06);  // as given it could not pass 0.714
+  // A bounding-box job already stands on the table: auto is refused there, and an unknown mode anywhere.
+  JobRequest b;
+  b.bbox_mm = Eigen::Vector3d(60, 60, 60);
+  b.truth = r.mesh;
+  b.placement = "auto";
+  EXPECT_THROW(validate_request(b), std::invalid_argument);
+  r.placement = "upside_down";
+  EXPECT_THROW(validate_request(r), std::invalid_argument);
 }
 
 TEST_F(SimCell, FromABoundingBoxRoughScanThenPlanAndMeasure) {

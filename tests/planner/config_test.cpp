@@ -113,6 +113,20 @@ TEST(Config, MissingFileAndBadPlannerSettings) {
   }
   std::ofstream(p) << "cover:\n  mode: exhaustive\n";
   EXPECT_THROW(load_planner_settings(p), ConfigError);
+  // placement: the limits declared once (PlacementSettings) are what the loader refuses with.
+  std::ofstream(p) << "placement:\n  mode: auto\n  candidates: 30\n";
+  try {
+    load_planner_settings(p);
+    ADD_FAILURE() << "accepted placement.candidates 30";
+  } catch (const ConfigError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("placement.candidates: must be in [1, 24], got 30"));
+  }
+  std::ofstream(p) << "placement:\n  mode: upside_down\n";
+  EXPECT_THROW(load_planner_settings(p), ConfigError);
+  const PlannerSettings shipped = load_planner_settings(SCANCELL_SOURCE_DIR "/config/planner/default.yaml");
+  EXPECT_FALSE(shipped.placement.automatic);
+  EXPECT_EQ(shipped.placement.candidates, PlacementSettings{}.candidates);
+  EXPECT_DOUBLE_EQ(shipped.placement.min_tip_angle_rad, PlacementSettings{}.min_tip_angle_rad);
   fs::remove(p);
 }
 

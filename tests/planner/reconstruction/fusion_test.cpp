@@ -44,14 +44,10 @@ std::vector<RangeImage> scans_around(const TriangleMesh& m, const Eigen::Vector3
   return out;
 }
 
-/// Edges not shared by exactly two triangles (0: closed).
+/// Edges not shared by exactly two triangles (0: closed; an empty mesh is not).
 std::size_t open_edges(const TriangleMesh& m) {
-  std::map<std::pair<std::uint32_t, std::uint32_t>, int> uses;
-  for (const auto& t : m.triangles)
-    for (int k = 0; k < 3; ++k) ++uses[{std::min(t[k], t[(k + 1) % 3]), std::max(t[k], t[(k + 1) % 3])}];
-  std::size_t bad = 0;
-  for (const auto& [e, n] : uses) bad += n != 2;
-  return uses.empty() ? 1 : bad;
+  const EdgeCounts c = count_edges(m);
+  return c.edges == 0 ? 1 : c.open + c.non_manifold;
 }
 
 /// Defects of an oriented closed 2-manifold: directed edges not used exactly once with their reverse used

@@ -97,9 +97,11 @@ TEST(Registration, UndoesACameraOrientationErrorThatShearsALineScan) {
   EXPECT_LT(Eigen::AngleAxisd(fixed.pose.camera_to_object.linear() * truth.pose.camera_to_object.linear().transpose() * tilt.transpose()).angle(), 0.05 * kDeg);
   EXPECT_LT((fixed.pose.camera_to_object.translation() - truth.pose.camera_to_object.translation() - shift).norm(), 0.1);
   // The pose moved with the mid-sweep profile, and samples are still where the pose says (acquisition's rule).
-  for (std::size_t k = 0; k < fixed.samples.size(); k += 97)
-    if (fixed.samples[k].valid())
+  for (std::size_t k = 0; k < fixed.samples.size(); k += 97) {
+    if (fixed.samples[k].valid()) {
       EXPECT_LT((fixed.pose.camera_to_object * fixed.samples[k].camera_mm.cast<double>() - fixed.samples[k].object_mm.cast<double>()).norm(), 1e-3);
+    }
+  }
   const IcpResult rigid = register_points(pts, model);
   ASSERT_TRUE(rigid.ok) << rigid.why;
   RangeImage rigid_fixed = seen;

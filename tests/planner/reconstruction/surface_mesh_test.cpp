@@ -55,12 +55,7 @@ TEST(SurfaceMesh, ASampledSphereComesBackClosedOnItsSurfaceWithNormalsOut) {
   }
   EXPECT_EQ(out, s.mesh.triangles.size());
   // Closed: every edge shared by exactly two triangles.
-  std::map<std::pair<std::uint32_t, std::uint32_t>, int> edges;
-  for (const auto& t : s.mesh.triangles)
-    for (int e = 0; e < 3; ++e) ++edges[std::minmax(t[e], t[(e + 1) % 3])];
-  std::size_t open = 0;
-  for (const auto& [e, k] : edges) open += k != 2;
-  EXPECT_EQ(open, 0u);
+  EXPECT_TRUE(count_edges(s.mesh).closed());
 }
 
 TEST(SurfaceMesh, AnUnmeasuredSideStaysAHoleAndNothingIsInventedThere) {
@@ -72,12 +67,9 @@ TEST(SurfaceMesh, AnUnmeasuredSideStaysAHoleAndNothingIsInventedThere) {
   double lowest = 1e9;
   for (const auto& v : s.mesh.vertices) lowest = std::min(lowest, v.z());
   EXPECT_GT(lowest, -1.0);  // the sampled rim, at most a few voxels below it
-  std::map<std::pair<std::uint32_t, std::uint32_t>, int> edges;
-  for (const auto& t : s.mesh.triangles)
-    for (int e = 0; e < 3; ++e) ++edges[std::minmax(t[e], t[(e + 1) % 3])];
-  std::size_t boundary = 0;
-  for (const auto& [e, k] : edges) boundary += k == 1;
-  EXPECT_GT(boundary, 100u);  // an open rim around the hole
+  const EdgeCounts edges = count_edges(s.mesh);
+  EXPECT_GT(edges.open, 100u);  // an open rim around the hole
+  EXPECT_EQ(edges.non_manifold, 0u);
   for (const float w : s.support) EXPECT_GT(w, 0.0f);
 }
 
