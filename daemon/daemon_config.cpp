@@ -158,6 +158,7 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
     if (!(c.jobs.failed_row_weight >= 0.0 && c.jobs.failed_row_weight <= 1.0))
       s.fail(s.key_path("failed_row_weight"), "must be in [0, 1]");
     c.jobs.min_gain_per_view_mm2 = s.non_negative("min_gain_per_view_mm2", c.jobs.min_gain_per_view_mm2);
+    c.jobs.next_setup_min_area_mm2 = s.ranged("next_setup_min_area_mm2", c.jobs.next_setup_min_area_mm2, 0.0, 1e6);
     c.jobs.coverage.row_fraction = s.get_or<double>("row_fraction", c.jobs.coverage.row_fraction);
     if (!(c.jobs.coverage.row_fraction > 0.0 && c.jobs.coverage.row_fraction <= 1.0))
       s.fail(s.key_path("row_fraction"), "must be in (0, 1]");

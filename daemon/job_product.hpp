@@ -7,9 +7,11 @@
 #include <vector>
 
 #include <Eigen/Core>
+#include <nlohmann/json.hpp>
 
 #include "daemon/journal.hpp"
 #include "planner/config.hpp"
+#include "planner/geometry/mesh.hpp"
 #include "planner/scan/range_image.hpp"
 
 namespace scancell::daemon {
@@ -40,11 +42,21 @@ CloudSummary write_job_cloud(const std::vector<StoredView>& views, std::int64_t 
 struct ModelSummary {
   std::size_t vertices = 0, triangles = 0, boundary_edges = 0;  // boundary: edges of the holes left open
   double voxel_mm = 0.0;
+  std::vector<Eigen::Vector3d> positions;  // the model's vertices (object frame, mm)
 };
 
 /// `file` (jobs/<id>/model.ply): the surface fused from the cloud's samples at a voxel of half the spec's
 /// sample spacing, 1/(2√ρ) (planner::mesh_from_oriented_points: OpenVDB sparse field, VolumeToMesh), open
 /// where nothing was measured; per-vertex `support`. Written durably.
 ModelSummary write_job_model(const CloudSummary& cloud, const planner::ModelSpec& spec, const std::filesystem::path& file);
+
+/// `file` (jobs/<id>/report.json, issue 19): the inspection report. The signed deviation of the cloud's
+/// samples and the model's vertices from `reference` (planner::signed_deviation: mean, RMS, 95th percentile
+/// and maximum of |d|, share within 3 × the precision spec), with the spec, the reference named and
+/// `coverage` (the result's coverage figures) copied in. Written durably; returns the report.
+nlohmann::json write_job_report(const std::filesystem::path& file, std::int64_t job, const planner::ModelSpec& spec,
+                                const planner::TriangleMesh& reference, const std::string& reference_name,
+                                const std::string& reference_kind, const CloudSummary& cloud, const ModelSummary& model,
+                                const nlohmann::json& coverage);
 
 }  // namespace scancell::daemon

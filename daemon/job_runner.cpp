@@ -255,6 +255,41 @@ void JobRunner::transition(Job& j, JobState s, const std::string& cause) {
   report_(j.progress);
 }
 
+json JobRunner::next_setup(Job& j) {
+  // Issue 20, first part: which way to turn the object so that the cell measures what this setup could not.
+  // The operator's turn (awaiting_operator, continue, alignment) is not built yet: the result says what to do.
+  try {
+    const std::vector<std::uint8_t> measured = j.coverage->measured_rows();
+    const sp::NextSetup n = sp::plan_next_setup(j.object, models_.sensor, j.spec, j.settings, j.rough_options,
+                                                settings_.planner_threads, models_.cell, j.cell.object_on_table.linear(), measured);
+    journal_.event(j.id, "next setup: " + n.reason);
+    json out = {{"reason", n.reason}, {"unmeasured_area_mm2", n.unmeasured_area_mm2}, {"poses_planned", n.options.size()}};
+    if (n.pose < 0) return out;
+    json rot = json::array();
+    for (int r = 0; r < 3; ++r)
+      for (int k = 0; k < 3; ++k) rot.push_back(n.object_to_table(r, k));
+    const Eigen::Vector3d down = n.rest.poses[n.pose].down_object;
+    out["resting_pose"] = n.pose + 1;
+    out["down_object"] = {down.x(), down.y(), down.z()};
+    out["object_to_table_row_major"] = rot;
+    out["predicted_gain_mm2"] = n.predicted_gain_mm2;
+    out["views"] = n.views;
+    // The picture: the rough model turned into that pose (seen from ±X, ±Y, ±Z of the table; -Z is what rests
+    // on the plate), measured grey, still unmeasured red.
+    sp::TriangleMesh turned = j.rough->mesh();
+    for (auto& v : turned.vertices) v = n.object_to_table * v;
+    const auto png = settings_.jobs_dir / std::to_string(j.id) / "next_setup.png";
+    std::filesystem::create_directories(png.parent_path());
+    sp::write_measurability_png(turned, measured, png.string());
+    out["picture"] = png.string();
+    return out;
+  } catch (const sp::PlanCancelled&) {
+    throw;
+  } catch (const std::exception& e) {
+    return json{{"error", e.what()}};  // the job's outcome stands; the advice failed and says why
+  }
+}
+
 void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
   json result = {{"state", to_string(state)},
                  {"rounds", j.round + 1},
@@ -267,14 +302,16 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
   std::vector<StoredView> stored = load_job_views(journal_, j.id);
   // The job's product: every spec-compliant registered sample, whatever the end (an aborted job keeps what
   // it measured). A failure to write it is reported in the result, not hidden, and does not undo the job.
+  std::optional<CloudSummary> product_cloud;
+  std::optional<ModelSummary> product_model;
   if (views > 0) {
     const auto cloud = settings_.jobs_dir / std::to_string(j.id) / "cloud.ply";
     try {
-      const CloudSummary c = write_job_cloud(stored, j.id, j.spec, cloud, true);
+      const CloudSummary& c = product_cloud.emplace(write_job_cloud(stored, j.id, j.spec, cloud, true));
       result["cloud"] = cloud.string();
       result["cloud_points"] = c.points;
       const auto model = cloud.parent_path() / "model.ply";
-      const ModelSummary m = write_job_model(c, j.spec, model);
+      const ModelSummary& m = product_model.emplace(write_job_model(c, j.spec, model));
       result["model"] = model.string();
       result["model_triangles"] = m.triangles;
       result["model_open_edges"] = m.boundary_edges;
@@ -312,6 +349,9 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
       result["hypothetical_unmeasured_rows"] = t.hypothetical;  // of those, not measured (incl. unmeasurable)
       result["hypothetical_unmeasured_area_mm2"] = t.hypothetical_area;
     }
+    if (state != JobState::aborted && settings_.next_setup_min_area_mm2 > 0.0 && t.unmeasured_area >= settings_.next_setup_min_area_mm2 &&
+        !j.object.vertices.empty())
+      result["next_setup"] = next_setup(j);
     // The unmeasured regions as points (object frame) for a viewer.
     std::filesystem::create_directories(settings_.jobs_dir / std::to_string(j.id));
     const auto path = settings_.jobs_dir / std::to_string(j.id) / "unmeasured.xyz";
@@ -422,6 +462,27 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
     sp::write_coverage_ply(fine, v.measured, (dir / "coverage.ply").string());
     result["coverage_png"] = (dir / "coverage.png").string();
     result["coverage_ply"] = (dir / "coverage.ply").string();
+  }
+  // The inspection report (issue 19): the cloud and the model against the reference, the submitted mesh (a
+  // bounding-box job has none but, in simulation, the object on the table).
+  const bool bbox = j.request.bbox_mm.has_value();
+  const sp::TriangleMesh& reference = bbox ? j.truth_object : j.object;
+  if (product_cloud && product_model && !reference.triangles.empty()) {
+    json coverage;
+    for (const char* k : {"measured_coverage", "estimated_coverage", "verified_mv", "rough_area_mm2", "unmeasured_area_mm2",
+                          "unmeasurable_rows", "open_area_mm2"})
+      if (result.contains(k)) coverage[k] = result[k];
+    try {
+      const auto file = settings_.jobs_dir / std::to_string(j.id) / "report.json";
+      const json r = write_job_report(file, j.id, j.spec, reference, bbox ? j.request.truth : j.request.mesh,
+                                      bbox ? "simulation truth (the object on the table)" : "submitted mesh", *product_cloud,
+                                      *product_model, coverage);
+      result["report"] = file.string();
+      result["cloud_deviation_rms_mm"] = r["cloud"]["rms_mm"];
+      result["model_deviation_p95_mm"] = r["model"]["p95_abs_mm"];
+    } catch (const std::exception& e) {
+      result["report_error"] = e.what();
+    }
   }
   journal_.set_result(j.id, result.dump());
   transition(j, state, cause);

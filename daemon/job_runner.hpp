@@ -41,6 +41,10 @@ struct JobSettings {
   int retire_after_failures = 3;
   double failed_row_weight = 0.25;
   double min_gain_per_view_mm2 = 5.0;
+  /// Issue 20: a job that ends (done or stalled) with at least this much of the rough model unmeasured plans
+  /// a second setup: the stable resting pose that lets the cell measure most of the rest, named in the
+  /// result with a picture (next_setup.png). 0: never.
+  double next_setup_min_area_mm2 = 100.0;
   planner::CoverageOptions coverage;               // when a rough-model row counts as measured
   std::chrono::milliseconds move_timeout{60000};   // one positioning move
   double scan_speed_mm_s = 0.0;                    // sweep speed; 0: the cell's scan_speed_mm_s
@@ -121,6 +125,8 @@ class JobRunner {
   /// The rough scan of a job given a bounding box: exploration views, stored, fused into jobs/ID/rough.off.
   void rough_scan(Job& j, const std::atomic<int>& stop);
   void finish(Job& j, JobState state, const std::string& cause);
+  /// Issue 20: the stable resting pose a second setup should use, for the result (planner::plan_next_setup).
+  nlohmann::json next_setup(Job& j);
   void transition(Job& j, JobState s, const std::string& cause = "");
 
   Journal& journal_;

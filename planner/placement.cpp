@@ -126,4 +126,59 @@ ViewPlan plan_with_placement(const TriangleMesh& object_mm, const SensorModel& s
   return p;
 }
 
+NextSetup plan_next_setup(const TriangleMesh& object_mm, const SensorModel& sensor, const ModelSpec& spec,
+                          const PlannerSettings& settings, const RoughModelOptions& rough_options, int threads,
+                          const CellModel& cell, const Eigen::Matrix3d& current,
+                          const std::vector<std::uint8_t>& measured, const std::atomic<int>* cancel) {
+  const PlacementSettings& placement = settings.placement;
+  validate(placement);
+  NextSetup next;
+  next.rest = resting_poses(object_mm);
+  const Eigen::Vector3d current_down = current.transpose() * -Eigen::Vector3d::UnitZ();
+  // What is left decides the gain, not the pose: the same rough model (same mesh and options) in every pose.
+  PlannerSettings s = settings;
+  s.cover.min_view_gain = 0.0;  // a second setup goes after every open row, as the closed loop does
+  int best = -1;                // into next.options
+  for (int k = 0; k < static_cast<int>(next.rest.poses.size()); ++k) {
+    const RestingPose& r = next.rest.poses[k];
+    if (static_cast<int>(next.options.size()) >= placement.candidates) break;
+    if (r.probability < placement.min_probability || r.tip_angle_rad < placement.min_tip_angle_rad) continue;
+    if (r.down_object.dot(current_down) > std::cos(2.0 * M_PI / 180.0)) continue;  // the setup just measured
+    CellModel c = cell;
+    c.object_on_table.linear() = r.object_to_table;
+    const ViewPlan p = plan_views(object_mm, sensor, spec, s, rough_options, threads, &c, &measured, nullptr, cancel);
+    if (next.unmeasured_area_mm2 == 0.0)
+      for (std::size_t row = 0; row < p.rough.size(); ++row)
+        if (!measured.at(row)) next.unmeasured_area_mm2 += p.rough.area_mm2[row];
+    PlacementOption o;
+    o.pose = k;
+    o.object_to_table = r.object_to_table;
+    o.probability = r.probability;
+    o.tip_angle_rad = r.tip_angle_rad;
+    o.estimated_coverage = next.unmeasured_area_mm2 > 0.0 ? p.predicted_gain_mm2 / next.unmeasured_area_mm2 : 0.0;
+    o.views = p.views.size();
+    o.cell_time_s = p.cell_report.travel_s + p.cell_report.scan_s;
+    o.plan_s = p.times.total_s();
+    next.options.push_back(o);
+    if (o.estimated_coverage > 0.0 && (best < 0 || better(o, next.options[best], placement.coverage_tolerance))) {
+      best = static_cast<int>(next.options.size()) - 1;
+      next.pose = k;
+      next.object_to_table = r.object_to_table;
+      next.predicted_gain_mm2 = p.predicted_gain_mm2;
+      next.views = p.views.size();
+      next.predicted_rows = p.predicted_rows;
+    }
+  }
+  std::ostringstream why;
+  if (next.pose < 0) {
+    why << "no other stable resting pose lets the cell measure any of the " << fixed(next.unmeasured_area_mm2, 0)
+        << " mm2 left (" << next.options.size() << " planned)";
+  } else {
+    why << "resting pose " << next.pose + 1 << ": " << next.views << " views predicted to measure "
+        << fixed(next.predicted_gain_mm2, 0) << " of the " << fixed(next.unmeasured_area_mm2, 0) << " mm2 left";
+  }
+  next.reason = why.str();
+  return next;
+}
+
 }  // namespace scancell::planner

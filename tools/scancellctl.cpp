@@ -128,6 +128,19 @@ void print_result(const json& reply, double seconds) {
   }
   if (seconds > 0.0) std::printf("  %-34s %.1f s\n", "watched for", seconds);
   if (r.contains("coverage_png")) std::printf("  %-34s %s\n", "coverage picture", r["coverage_png"].get<std::string>().c_str());
+  if (r.contains("cloud"))
+    std::printf("  %-34s %s (%zu samples)\n", "registered cloud", r["cloud"].get<std::string>().c_str(), r.value("cloud_points", std::size_t{0}));
+  if (r.contains("model"))
+    std::printf("  %-34s %s (%zu triangles, %zu open edges)\n", "surface model", r["model"].get<std::string>().c_str(),
+                r.value("model_triangles", std::size_t{0}), r.value("model_open_edges", std::size_t{0}));
+  if (r.contains("report"))
+    std::printf("  %-34s %s (cloud %.4f mm RMS, model p95 %.4f mm from the reference)\n", "inspection report",
+                r["report"].get<std::string>().c_str(), num("cloud_deviation_rms_mm"), num("model_deviation_p95_mm"));
+  if (r.contains("placement"))
+    std::printf("  %-34s %s\n", "placement", r["placement"].value("reason", std::string()).c_str());
+  if (r.contains("next_setup"))
+    std::printf("  %-34s %s%s%s\n", "next setup", r["next_setup"].value("reason", r["next_setup"].value("error", std::string())).c_str(),
+                r["next_setup"].contains("picture") ? "; picture " : "", r["next_setup"].value("picture", std::string()).c_str());
   if (r.contains("unmeasured_file")) std::printf("  %-34s %s\n", "unmeasured rows", r["unmeasured_file"].get<std::string>().c_str());
 }
 

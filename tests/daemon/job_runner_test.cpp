@@ -179,9 +179,32 @@ TEST_F(SimCell, CubeJobMeasuresEverythingTheCellCanMeasure) {
     EXPECT_EQ(result["open_rows"].get<int>(), 0);
   }
   EXPECT_TRUE(fs::exists(result["coverage_png"].get<std::string>()));
+  // Issue 20, first part: the base is what is left, so the second setup is any other face down (a cube rests
+  // on each alike), predicted to measure most of the base's 2500 mm², with a picture of it turned so.
+  ASSERT_TRUE(result.contains("next_setup")) << result.dump();
+  const auto& next = result["next_setup"];
+  ASSERT_TRUE(next.contains("resting_pose")) << next.dump();
+  EXPECT_GT(next["down_object"][2].get<double>(), -0.5) << next.dump();  // not the base down again
+  EXPECT_GT(next["predicted_gain_mm2"].get<double>(), 0.8 * 2500.0) << next.dump();
+  EXPECT_LT(next["predicted_gain_mm2"].get<double>(), next["unmeasured_area_mm2"].get<double>() + 1e-9);
+  EXPECT_TRUE(fs::exists(next["picture"].get<std::string>()));
   for (auto p : journal->plans(job)) EXPECT_FALSE(journal->first_unfinished_view(p).has_value());
   EXPECT_EQ(stored_views(job), static_cast<std::size_t>(result["views"].get<int>()));
   EXPECT_TRUE(journal->check().empty());
+  // The inspection report (issue 19): cloud and model against the submitted cube, signed; the issue's targets
+  // on the seen part are a mean within 0.03 mm and 95 % within 0.1 mm.
+  {
+    std::ifstream rf(result["report"].get<std::string>());
+    ASSERT_TRUE(rf) << result.dump();
+    const auto report = nlohmann::json::parse(rf);
+    EXPECT_EQ(report["reference_kind"], "submitted mesh");
+    EXPECT_LT(std::abs(report["cloud"]["mean_mm"].get<double>()), 0.03) << report.dump();
+    EXPECT_LT(report["cloud"]["p95_abs_mm"].get<double>(), 0.1) << report.dump();
+    EXPECT_LT(std::abs(report["model"]["mean_mm"].get<double>()), 0.03) << report.dump();
+    EXPECT_LT(report["model"]["p95_abs_mm"].get<double>(), 0.1) << report.dump();
+    EXPECT_EQ(report["cloud"]["points"].get<std::size_t>(), result["cloud_points"].get<std::size_t>());
+    std::cout << "report: cloud " << report["cloud"].dump() << "\nmodel " << report["model"].dump() << "\n";
+  }
   // The lifecycle in order, journalled.
   const auto ev = journal->events(job);
   auto at = [&](const std::string& s) {

@@ -174,6 +174,33 @@ TEST(Placement, ATurntableJobStandsABoxOnItsSmallestFace) {
   EXPECT_EQ(p.views.size(), chosen.views);
 }
 
+TEST(Placement, TheNextSetupTurnsTheUnmeasuredBaseToWhereTheCellSeesIt) {
+  // Setup 1 measured the box lying flat: all but its 120 × 80 base (9600 mm²). The second setup is planned
+  // for the base only, in another stable pose, and is predicted to measure nearly all of it.
+  const sp::TriangleMesh box = closed_box({120, 80, 40}, 5);
+  const sp::CellModel cell = sp::load_cell(sp::testing::source_path("config/cells/turntable-lift-tilt.yaml"));
+  sp::RoughModelOptions rough;
+  rough.target_vertices = 600;
+  const sp::ViewPlan first = sp::plan_views(box, sp::testing::thesis_sensor(), sp::testing::thesis_spec(), {}, rough, 0, &cell);
+  std::vector<std::uint8_t> measured(first.rough.size(), 1);
+  double base = 0.0;
+  for (std::size_t r = 0; r < first.rough.size(); ++r)
+    if (first.rough.normals[r].z() < -0.9 && first.rough.points[r].z() < 1e-6) {
+      measured[r] = 0;
+      base += first.rough.area_mm2[r];
+    }
+  // The rows along the base's rim carry normals averaged with the sides' and are not among them: 8600 of 9600.
+  EXPECT_NEAR(base, 9600.0, 1200.0);
+  const sp::NextSetup next = sp::plan_next_setup(box, sp::testing::thesis_sensor(), sp::testing::thesis_spec(), {}, rough,
+                                                 0, cell, first.cell->object_on_table.linear(), measured);
+  ASSERT_GE(next.pose, 0) << next.reason;
+  EXPECT_NEAR(next.unmeasured_area_mm2, base, 1e-6);
+  EXPECT_GT(next.rest.poses[next.pose].down_object.z(), -0.5) << next.reason;  // not lying on the base again
+  EXPECT_GT(next.predicted_gain_mm2, 0.9 * base) << next.reason;
+  for (auto r : next.predicted_rows) EXPECT_FALSE(measured[r]);  // it plans for what is left only
+  for (const auto& o : next.options) EXPECT_LT(o.estimated_coverage, 1.0 + 1e-9);
+}
+
 TEST(Placement, SettingsOutOfRangeNameTheKey) {
   sp::PlacementSettings s;
   s.candidates = 0;
