@@ -34,7 +34,7 @@ const std::map<std::string, std::map<std::string, Field>>& schema() {
   static const std::map<std::string, std::map<std::string, Field>> s = {
       {"submit", {{"mesh", {Type::string, false}}, {"bbox_mm", {Type::vec3, false}}, {"spec", {Type::string, false}}, {"settings", {Type::string, false}},
                   {"fit_mm", {Type::number, false}}, {"truth", {Type::string, false}},
-                  {"rough_vertices", {Type::integer, false}}}},
+                  {"rough_vertices", {Type::integer, false}}, {"placement", {Type::string, false}}}},
       {"status", {{"job", {Type::integer, false}}}},
       {"list", {}},
       {"watch", {{"job", {Type::integer, true}}}},

@@ -281,6 +281,7 @@ json Daemon::handle(const json& req, const std::function<bool(const json&)>& sen
       if (n < 50 || n > 200000) throw std::invalid_argument("submit: 'rough_vertices' must be in [50, 200000]");
       r.rough_vertices = static_cast<std::size_t>(n);
     }
+    r.placement = req.value("placement", std::string());
     try {
       validate_request(r, &shutting_down_);
     } catch (const planner::MeshError& e) {

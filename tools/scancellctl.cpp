@@ -1,6 +1,6 @@
 // scancellctl: the command-line client of scancelld's control socket (docs/daemon.md).
 //   scancellctl [--socket PATH] [--json] submit --mesh FILE [--fit-mm L] [--spec FILE] [--settings FILE]
-//                                          [--truth FILE] [--rough-vertices N] [--watch]
+//                                          [--truth FILE] [--rough-vertices N] [--placement auto|as_given] [--watch]
 //   scancellctl status [JOB] | list | watch JOB | pause JOB | resume JOB | abort JOB | reload
 //   scancellctl calibrate sensor|turntable_axis|positioner [--watch]
 // Exit codes: 0 success (watch: the job is done), 1 the daemon refused the request, 2 usage, 3 cannot reach
@@ -212,6 +212,11 @@ int main(int argc, char** argv) {
   submit->add_option("--settings", settings, "planner settings (YAML; default: the daemon's)")->check(CLI::ExistingFile);
   submit->add_option("--truth", truth, "simulation: the object actually on the table (default: the mesh)")->check(CLI::ExistingFile);
   submit->add_option("--rough-vertices", rough_vertices, "rough-model size (rows of the measurability matrix)")->check(CLI::Range(50, 200000));
+  std::string placement;
+  submit->add_option("--placement", placement,
+                     "how the object rests on the plate: auto (plan its stable resting poses, keep the best; the result says "
+                     "how to place it) or as_given (default: the daemon's settings)")
+      ->check(CLI::IsMember({"auto", "as_given"}));
   submit->add_flag("--watch", then_watch, "then watch the job to its end");
 
   std::int64_t job = 0;
@@ -255,6 +260,7 @@ int main(int argc, char** argv) {
       if (!settings.empty()) req["settings"] = absolute(settings);
       if (!truth.empty()) req["truth"] = absolute(truth);
       if (rough_vertices > 0) req["rough_vertices"] = rough_vertices;
+      if (!placement.empty()) req["placement"] = placement;
     } else if (cmd == "calibrate") {
       req["kind"] = kind;
     } else if (cmd == "status") {

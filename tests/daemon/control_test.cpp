@@ -83,6 +83,7 @@ TEST(Control, BadRequestsAreRefusedClearlyAndTheServerKeepsServing) {
   refused("{\"cmd\": \"explode\"}", "unknown command 'explode'");
   refused("{\"cmd\": \"submit\", \"mesh\": \"a.off\", \"colour\": \"red\"}", "unknown field 'colour'");
   refused("{\"cmd\": \"submit\", \"mesh\": 3}", "field 'mesh' must be a string");
+  refused("{\"cmd\": \"submit\", \"mesh\": \"a.off\", \"placement\": 1}", "field 'placement' must be a string");
   refused("{\"cmd\": \"abort\", \"job\": \"7\"}", "field 'job' must be an integer");
   refused("{\"cmd\": \"watch\"}", "missing field 'job'");
   refused("{\"cmd\": \"submit\", \"mesh\": \"" + std::string(70000, 'x') + "\"}", "longer than 64 KiB");
@@ -105,7 +106,7 @@ TEST(Control, BadRequestsAreRefusedClearlyAndTheServerKeepsServing) {
   EXPECT_TRUE(r["ok"].get<bool>());
   EXPECT_EQ(r["outcome"], "done");
   EXPECT_EQ(handled, 2);
-  EXPECT_EQ(server.refused(), 12u);
+  EXPECT_EQ(server.refused(), 13u);
 }
 
 // Issue 16, defect 4: the rest of an oversized line was skipped with a blocking recv, so a client that sent

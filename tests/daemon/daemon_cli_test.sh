@@ -83,6 +83,9 @@ printf 'precision_mm: hunter2-secret\ndensity_per_mm2: 2\n' > "$W/inbox/bad-spec
 out=$(ctl submit --mesh "$SRC/tests/data/cube50.off" --spec "$W/inbox/bad-spec.yaml" 2>&1); rc=$?
 [ $rc = 1 ] && echo "$out" | grep -q "precision_mm" || fail "bad spec: exit $rc: $out"
 echo "$out" | grep -q "hunter2" && fail "the refusal quoted the file's content: $out"
+# placement auto (issue 15) chooses how a mesh's object rests; a bounding-box job already stands on the table.
+out=$(ctl submit --bbox-mm 60,60,60 --truth "$SRC/tests/data/cube50.off" --placement auto 2>&1); rc=$?
+[ $rc = 1 ] && echo "$out" | grep -q "'placement' auto needs a mesh" || fail "placement auto on a bounding-box job: exit $rc: $out"
 
 # 4. A job: pause at a safe point, resume, abort.
 ctl submit --mesh "$SRC/tests/data/cube50.off" --rough-vertices 400 > /dev/null || fail "submit"
