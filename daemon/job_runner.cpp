@@ -26,10 +26,11 @@ namespace sp = scancell::planner;
 namespace dr = scancell::drivers;
 using Clock = std::chrono::steady_clock;
 
-json matrix_json(const Eigen::Matrix4d& m) {
+/// A matrix (4×4 pose, 3×3 rotation) as its numbers row by row.
+json matrix_json(const Eigen::Ref<const Eigen::MatrixXd>& m) {
   json a = json::array();
-  for (int r = 0; r < 4; ++r)
-    for (int c = 0; c < 4; ++c) a.push_back(m(r, c));
+  for (Eigen::Index r = 0; r < m.rows(); ++r)
+    for (Eigen::Index c = 0; c < m.cols(); ++c) a.push_back(m(r, c));
   return a;
 }
 
@@ -265,13 +266,10 @@ json JobRunner::next_setup(Job& j) {
     journal_.event(j.id, "next setup: " + n.reason);
     json out = {{"reason", n.reason}, {"unmeasured_area_mm2", n.unmeasured_area_mm2}, {"poses_planned", n.options.size()}};
     if (n.pose < 0) return out;
-    json rot = json::array();
-    for (int r = 0; r < 3; ++r)
-      for (int k = 0; k < 3; ++k) rot.push_back(n.object_to_table(r, k));
     const Eigen::Vector3d down = n.rest.poses[n.pose].down_object;
     out["resting_pose"] = n.pose + 1;
     out["down_object"] = {down.x(), down.y(), down.z()};
-    out["object_to_table_row_major"] = rot;
+    out["object_to_table_row_major"] = matrix_json(n.object_to_table);
     out["predicted_gain_mm2"] = n.predicted_gain_mm2;
     out["views"] = n.views;
     // The picture: the rough model turned into that pose (seen from ±X, ±Y, ±Z of the table; -Z is what rests
@@ -784,10 +782,8 @@ void JobRunner::rough_scan(Job& j, const std::atomic<int>& stop) {
   {
     // Simulation: the object stands centred on the turntable, its base on the table top.
     j.truth_table = load_object(j.request.truth, j.request.fit_mm);
-    Eigen::AlignedBox3d box;
-    for (const auto& v : j.truth_table.vertices) box.extend(v);
-    const Eigen::Vector3d shift(-box.center().x(), -box.center().y(), -box.min().z());
-    for (auto& v : j.truth_table.vertices) v += shift;
+    const Eigen::Isometry3d place = sp::place_on_plate(j.truth_table, Eigen::Matrix3d::Identity());
+    for (auto& v : j.truth_table.vertices) v = place * v;
   }
   const auto dir = settings_.jobs_dir / std::to_string(j.id);
   const auto rough_file = dir / "rough.off";

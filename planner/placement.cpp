@@ -18,6 +18,11 @@ void check_range(const char* key, double v, double lo, double hi) {
   }
 }
 
+/// A pose the choice may take: stable, settled in often enough, not toppled by a small tilt.
+bool offered(const RestingPose& r, const PlacementSettings& s) {
+  return r.probability >= s.min_probability && r.tip_angle_rad >= s.min_tip_angle_rad;
+}
+
 /// More area first; within the tolerance, fewer views; then the likelier pose.
 bool better(const PlacementOption& a, const PlacementOption& b, double tolerance) {
   if (a.estimated_coverage > b.estimated_coverage + tolerance) return true;
@@ -57,7 +62,7 @@ ViewPlan plan_with_placement(const TriangleMesh& object_mm, const SensorModel& s
   for (int k = 0; k < static_cast<int>(choice.rest.poses.size()); ++k) {
     const RestingPose& r = choice.rest.poses[k];
     if (static_cast<int>(choice.options.size()) >= placement.candidates) break;
-    if (r.probability < placement.min_probability || r.tip_angle_rad < placement.min_tip_angle_rad) continue;
+    if (!offered(r, placement)) continue;
     PlacementOption o;
     o.pose = k;
     // As given when it rests on the same face (within 2°): keep the configured rotation about the table axis.
@@ -96,13 +101,8 @@ ViewPlan plan_with_placement(const TriangleMesh& object_mm, const SensorModel& s
   }
   // Offered: a stable, not marginal pose an object settles in often enough (an as-given orientation that is
   // none of those is shown for comparison only: on a real plate it would not stay).
-  auto offered = [&](const PlacementOption& o) {
-    if (o.pose < 0) return false;
-    const RestingPose& r = choice.rest.poses[o.pose];
-    return r.probability >= placement.min_probability && r.tip_angle_rad >= placement.min_tip_angle_rad;
-  };
   for (int k = 0; k < static_cast<int>(choice.options.size()); ++k)
-    if (offered(choice.options[k]) && (choice.chosen < 0 || better(choice.options[k], choice.options[choice.chosen], placement.coverage_tolerance)))
+    if (choice.options[k].pose >= 0 && offered(choice.rest.poses[choice.options[k].pose], placement) && (choice.chosen < 0 || better(choice.options[k], choice.options[choice.chosen], placement.coverage_tolerance)))
       choice.chosen = k;
   if (choice.chosen < 0)
     throw DataError("placement: none of the object's " + std::to_string(choice.rest.poses.size()) +
@@ -142,7 +142,7 @@ NextSetup plan_next_setup(const TriangleMesh& object_mm, const SensorModel& sens
   for (int k = 0; k < static_cast<int>(next.rest.poses.size()); ++k) {
     const RestingPose& r = next.rest.poses[k];
     if (static_cast<int>(next.options.size()) >= placement.candidates) break;
-    if (r.probability < placement.min_probability || r.tip_angle_rad < placement.min_tip_angle_rad) continue;
+    if (!offered(r, placement)) continue;
     if (r.down_object.dot(current_down) > std::cos(2.0 * M_PI / 180.0)) continue;  // the setup just measured
     CellModel c = cell;
     c.object_on_table.linear() = r.object_to_table;
