@@ -150,6 +150,54 @@ int longest_lost_run(const sp::RangeImage& image) {
   return longest;
 }
 
+std::vector<std::uint32_t> rows_passed_without_profile(const sp::RangeImage& image, const std::vector<Eigen::Vector3d>& points,
+                                                       const std::vector<std::uint32_t>& rows) {
+  const int n = image.rows;
+  if (image.acquired_rows.empty() || rows.empty() || n < 2) return {};
+  if (image.acquired_rows.size() != static_cast<std::size_t>(n))
+    throw sp::DataError("range image: " + std::to_string(image.acquired_rows.size()) + " acquired-row flags for " +
+                        std::to_string(n) + " rows");
+  for (const auto r : rows)
+    if (r >= points.size()) throw sp::DataError("row " + std::to_string(r) + " of " + std::to_string(points.size()) + " rough-model points");
+  if (longest_lost_run(image) == 0) return {};
+  // Least-squares line y = a + b j through each acquired row's mean view-frame y.
+  double s1 = 0, sj = 0, sy = 0, sjj = 0, sjy = 0;
+  for (int j = 0; j < n; ++j) {
+    if (!image.acquired_rows[static_cast<std::size_t>(j)]) continue;
+    double y = 0;
+    int k = 0;
+    for (int i = 0; i < image.columns; ++i)
+      if (image.at(i, j).valid()) {
+        y += image.at(i, j).camera_mm.y();
+        ++k;
+      }
+    if (k == 0) continue;
+    y /= k;
+    s1 += 1;
+    sj += j;
+    sy += y;
+    sjj += double(j) * j;
+    sjy += j * y;
+  }
+  const double det = s1 * sjj - sj * sj;
+  if (s1 < 2 || std::abs(det) < 1e-12) return rows;
+  const double b = (s1 * sjy - sj * sy) / det, a = (sy - b * sj) / s1;
+  if (std::abs(b) < 1e-9) return rows;
+  const Eigen::Isometry3d object_to_view = image.pose.camera_to_object.inverse();
+  std::vector<std::uint32_t> out;
+  for (const auto r : rows) {
+    const double j = ((object_to_view * points[r]).y() - a) / b;
+    if (j < -1.0 || j > n) continue;  // outside the sweep: a lost profile cannot be why
+    const int lo = std::max(0, static_cast<int>(std::floor(j)) - 1), hi = std::min(n - 1, static_cast<int>(std::ceil(j)) + 1);
+    for (int k = lo; k <= hi; ++k)
+      if (!image.acquired_rows[static_cast<std::size_t>(k)]) {
+        out.push_back(r);
+        break;
+      }
+  }
+  return out;
+}
+
 Acquisition take_whole(const std::function<Acquisition()>& take, int attempts, int max_gap_rows,
                        const std::function<void(const std::string&)>& log) {
   if (attempts < 1) throw sp::DataError("take_whole: attempts " + std::to_string(attempts) + " (at least 1)");

@@ -5,7 +5,9 @@
 // back. Shared by the job runner and the calibration runs.
 #include <atomic>
 #include <functional>
+#include <cstdint>
 #include <string>
+#include <vector>
 
 #include "daemon/job_runner.hpp"
 
@@ -26,6 +28,15 @@ Acquisition acquire_view(drivers::Positioner& positioner, ScanHead& head, const 
 
 /// The most profiles in a row the sweep passed without firing (0 when every row was acquired).
 int longest_lost_run(const planner::RangeImage& image);
+
+/// Of `rows` (indices into `points`, object frame, mm), those the sweep passed without a profile: the point
+/// lies in the laser plane of a lost row or of a row next to it (eq. 3.8's density needs the profiles on both
+/// sides). Where each row's plane lies is read from the image itself (its acquired profiles' y in the view
+/// frame, fitted against the row index), so no cell model is needed and a stored scan answers the same.
+/// A sweep with fewer than two acquired profiles holding samples passed every row.
+std::vector<std::uint32_t> rows_passed_without_profile(const planner::RangeImage& image,
+                                                       const std::vector<Eigen::Vector3d>& points,
+                                                       const std::vector<std::uint32_t>& rows);
 
 /// A measurement that must have no hole (calibration): a sweep that lost more than `max_gap_rows` profiles
 /// in a row is taken again, up to `attempts` sweeps in all, each retake told to `log`. Returns the first take

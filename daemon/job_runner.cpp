@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <map>
 #include <mutex>
 #include <sstream>
 #include <thread>
@@ -81,17 +82,41 @@ RowTally tally_unmeasured(const sp::RoughModel& rough, const std::vector<std::ui
   return t;
 }
 
+/// The rows a round holds against itself: those a view predicted and measured no profile's worth of harm
+/// to. A row a view's sweep passed without a profile (a loaded host, a scanner that dropped frames) did not
+/// fail for its geometry, so that view's prediction of it is not held against it and the loop may aim at it
+/// again. The round info lists `view_rows` per view (plans before it had only `predicted_rows`: all held) and,
+/// added by the runner from the stored scans, `excused_rows` (view index -> rows passed without a profile).
+std::vector<std::uint32_t> held_rows(const json& info) {
+  if (!info.contains("view_rows") || !info.contains("excused_rows") || info.at("excused_rows").empty())
+    return info.value("predicted_rows", std::vector<std::uint32_t>{});
+  const auto& per_view = info.at("view_rows");
+  const auto& excused = info.at("excused_rows");
+  std::vector<std::uint32_t> held;
+  for (std::size_t v = 0; v < per_view.size(); ++v) {
+    auto rows = per_view[v].get<std::vector<std::uint32_t>>();
+    const auto ex = excused.find(std::to_string(v));
+    if (ex != excused.end()) {
+      auto skip = ex->get<std::vector<std::uint32_t>>();
+      std::sort(skip.begin(), skip.end());
+      rows.erase(std::remove_if(rows.begin(), rows.end(), [&](std::uint32_t r) { return std::binary_search(skip.begin(), skip.end(), r); }),
+                 rows.end());
+    }
+    held.insert(held.end(), rows.begin(), rows.end());
+  }
+  std::sort(held.begin(), held.end());
+  held.erase(std::unique(held.begin(), held.end()), held.end());
+  return held;
+}
+
 /// The closed loop's evidence: per row, how many executed rounds predicted it measurable while it is still
 /// unmeasured (each round's plan info keeps its predicted rows; what is measured now is the coverage).
+/// Rows a round predicted through views that lost profiles only are not counted (held_rows).
 std::vector<std::uint8_t> failure_counts(const std::vector<json>& round_infos, const std::vector<std::uint8_t>& measured) {
   std::vector<std::uint8_t> fails(measured.size(), 0);
-  for (const auto& info : round_infos) {
-    if (!info.contains("predicted_rows")) continue;
-    for (const auto& r : info.at("predicted_rows")) {
-      const auto row = r.get<std::size_t>();
+  for (const auto& info : round_infos)
+    for (const auto row : held_rows(info))
       if (row < fails.size() && !measured[row] && fails[row] < 255) ++fails[row];
-    }
-  }
   return fails;
 }
 
@@ -116,11 +141,9 @@ std::vector<std::uint8_t> given_up_rows(const std::vector<json>& round_infos, co
   for (std::size_t r = 0; r < fails.size(); ++r) out[r] = fails[r] >= retire_after;
   if (round_infos.size() > 1) {
     const json& last = round_infos.back();
-    if (measured_now <= last.value("measured_before", 0.0) + 1e-9 && last.contains("predicted_rows"))
-      for (const auto& r : last.at("predicted_rows")) {
-        const auto row = r.get<std::size_t>();
+    if (measured_now <= last.value("measured_before", 0.0) + 1e-9)
+      for (const auto row : held_rows(last))
         if (row < out.size() && !measured[row]) out[row] = 1;
-      }
   }
   return out;
 }
@@ -236,7 +259,31 @@ struct JobRunner::Job {
   double view_seconds = 0.0;        // mean executed view time this session
   int views_timed = 0;
   std::vector<double> planned_view_s;
+  /// Per plan and view (0-based), the predicted rows its sweep passed without a profile (held_rows).
+  std::map<std::int64_t, std::map<int, std::vector<std::uint32_t>>> excused;
+  std::vector<std::vector<std::uint32_t>> view_rows;  // the executing round's rows per view
 };
+
+void JobRunner::note_lost_profiles(Job& j, std::int64_t plan, int view, const sp::RangeImage& img,
+                                   const std::vector<std::uint32_t>& predicted) {
+  auto passed = rows_passed_without_profile(img, j.rough->points, predicted);
+  if (!passed.empty()) j.excused[plan][view] = std::move(passed);
+}
+
+/// Every executed round's plan info, with the rows its views' sweeps passed without a profile (held_rows).
+std::vector<json> JobRunner::round_infos(const Job& j) {
+  std::vector<json> infos;
+  for (const auto& [plan, round] : journal_.plan_rounds(j.id)) {
+    if (round < 0) continue;
+    json info = json::parse(journal_.plan_info(plan));
+    json ex = json::object();
+    if (const auto e = j.excused.find(plan); e != j.excused.end())
+      for (const auto& [view, rows] : e->second) ex[std::to_string(view)] = rows;
+    info["excused_rows"] = ex;
+    infos.push_back(std::move(info));
+  }
+  return infos;
+}
 
 JobRunner::JobRunner(Journal& journal, const CellModels& models, dr::Positioner& positioner, ScanHeadFactory heads,
                      JobSettings settings, Report report)
@@ -362,9 +409,7 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
     }
     result["unmeasured_file"] = path.string();
     // The closed loop's account: what each round predicted and delivered, and the rows it gave up on.
-    std::vector<json> infos;
-    for (const auto& [plan, round] : journal_.plan_rounds(j.id))
-      if (round >= 0) infos.push_back(json::parse(journal_.plan_info(plan)));
+    const std::vector<json> infos = round_infos(j);
     if (!infos.empty()) {
       const json gains = round_gains(infos, j.progress.measured, j.rough->total_area_mm2);
       json weak = json::array();
@@ -542,6 +587,7 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
                          {"candidates", p.candidates},
                          {"views", p.views.size()},
                          {"predicted_rows", p.predicted_rows},
+                         {"view_rows", p.view_rows},
                          {"predicted_gain_mm2", p.predicted_gain_mm2},
                          {"plan_s", p.times.total_s()}};
       if (p.placement) {
@@ -576,13 +622,17 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
     if (settings_.register_views)
       j.cloud = std::make_unique<sp::ModelCloud>(sp::ModelCloud::from_mesh(j.request.bbox_mm ? j.rough->mesh() : j.object, 1.0));
     std::vector<Eigen::Vector3d> cloud_points, cloud_normals;
-    for (auto plan : plans)
+    for (auto plan : plans) {
+      const auto rows_of_view = json::parse(journal_.plan_info(plan)).value("view_rows", std::vector<std::vector<std::uint32_t>>{});
       for (const auto& s : journal_.scans(plan)) {
         if (!s.note.empty()) continue;  // stored, but not counted (its registration failed)
         const sp::RangeImage img = sp::range_image_from_ply(journal_.read_scan(s), s.file);
+        if (s.view >= 0 && static_cast<std::size_t>(s.view) < rows_of_view.size())
+          note_lost_profiles(j, plan, s.view, img, rows_of_view[static_cast<std::size_t>(s.view)]);
         j.coverage->add(img);
         if (j.cloud) sp::image_points_normals(img, 3, cloud_points, cloud_normals);
       }
+    }
     if (j.cloud && !cloud_points.empty()) j.cloud->add(cloud_points, cloud_normals);
     j.progress.measured = j.coverage->coverage();
 
@@ -603,6 +653,7 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
       j.progress.round = j.round;
       const json info = json::parse(journal_.plan_info(plan));
       const auto views = journal_.views(plan);
+      j.view_rows = info.value("view_rows", std::vector<std::vector<std::uint32_t>>{});
       j.progress.views = static_cast<int>(views.size());
       j.progress.view = 0;
       // The estimate for the whole model: measured before this round plus the round's share of the rest.
@@ -635,8 +686,7 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
         journal_.event(id, "round " + std::to_string(j.round) + ": cloud.ply holds " + std::to_string(c.points) +
                                " spec-compliant samples from " + std::to_string(c.views) + " views");
       }
-      std::vector<json> infos;
-      for (auto pl : plans) infos.push_back(json::parse(journal_.plan_info(pl)));
+      const std::vector<json> infos = round_infos(j);
       const double total_mm2 = j.rough->total_area_mm2;
       {
         const json g = round_gains(infos, j.progress.measured, total_mm2).back();
@@ -644,6 +694,14 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
                                fmt(g.at("predicted_gain_mm2").get<double>(), 1) + " mm2, realized " +
                                fmt(g.at("realized_gain_mm2").get<double>(), 1) + " mm2" +
                                (g.at("under_20_percent").get<bool>() ? " (under 20 % of the prediction)" : ""));
+        std::vector<std::uint32_t> passed;
+        for (const auto& [view, rows] : j.excused[plan]) passed.insert(passed.end(), rows.begin(), rows.end());
+        std::sort(passed.begin(), passed.end());
+        passed.erase(std::unique(passed.begin(), passed.end()), passed.end());
+        if (!passed.empty())
+          journal_.event(id, "round " + std::to_string(j.round) + ": " + std::to_string(passed.size()) + " predicted rows lay where " +
+                                 std::to_string(j.excused[plan].size()) + (j.excused[plan].size() == 1 ? " view's sweep" : " views' sweeps") +
+                                 " lost profiles; not counted as failures");
       }
       // Rows the executed rounds were predicted to measure and did not: retired after
       // jobs.retire_after_failures such rounds (needs attention), down-weighted before.
@@ -740,6 +798,7 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
                           {"candidates", p.candidates},
                           {"views", p.views.size()},
                           {"predicted_rows", p.predicted_rows},
+                          {"view_rows", p.view_rows},
                           {"predicted_gain_mm2", p.predicted_gain_mm2},
                           {"retired_rows", n_retired},
                           {"plan_s", p.times.total_s()}};
@@ -893,6 +952,8 @@ void JobRunner::execute_view(Job& j, std::int64_t plan, const ViewRecord& v, con
   });
   sp::RangeImage img = got.image;
   const int lost = got.lost_profiles;
+  if (static_cast<std::size_t>(v.index) < j.view_rows.size())
+    note_lost_profiles(j, plan, v.index, img, j.view_rows[static_cast<std::size_t>(v.index)]);
 
   // Register the view to the model before its coverage counts (thesis 1.1.4: the positioner's pose is not
   // good enough to trust the samples where it put them).

@@ -331,7 +331,13 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     for (auto j : p.cover.views) p.views.push_back(candidates[j]);
     {
       std::vector<std::uint8_t> predicted(p.rough.size(), 0);
-      for (auto j : p.cover.views) matrix.columns[j].for_each([&](std::uint32_t r) { predicted[r] = 1; });
+      for (auto j : p.cover.views) {
+        std::vector<std::uint32_t>& rows = p.view_rows.emplace_back();
+        matrix.columns[j].for_each([&](std::uint32_t r) {
+          predicted[r] = 1;
+          if (!(measured_rows && (*measured_rows)[r])) rows.push_back(r);
+        });
+      }
       for (std::uint32_t r = 0; r < predicted.size(); ++r)
         if (predicted[r] && !(measured_rows && (*measured_rows)[r])) {
           p.predicted_rows.push_back(r);

@@ -54,6 +54,10 @@ struct ViewPlan {
   std::vector<Viewpoint> views;  // in selection order
   std::vector<std::uint32_t> predicted_rows;  // rows the chosen views are predicted to measure (not yet measured)
   double predicted_gain_mm2 = 0.0;            // their area
+  /// Per view (plan order), the rows of predicted_rows that view is predicted to measure: the closed loop's
+  /// evidence per view, so that a row a view failed for a reason not of geometry (its sweep lost profiles)
+  /// is not held against the row.
+  std::vector<std::vector<std::uint32_t>> view_rows;
   std::vector<Viewpoint> candidate_views;  // every candidate the matrix evaluated (settings.keep_candidates)
   CoverResult cover;
   ExactReport exact;        // filled when settings.cover.mode == exact

@@ -161,6 +161,37 @@ TEST(TakeWhole, RetakesASweepWithARunOfLostProfilesAndKeepsTheBestTake) {
   EXPECT_THROW(take_whole(take, 0, 4), sp::DataError);
 }
 
+// Issue 15: a row the sweep passed without a profile did not fail for its geometry. A 10-row sweep, profile
+// j in the view-frame plane y = 2 j - 9 mm, the view turned 90° about x (object z = view y), row 5 lost:
+// points between rows 3 and 7 lie in or beside the lost profile, the others not.
+TEST(LostProfiles, RowsInOrBesideALostProfileArePassedTheRestAreNot) {
+  sp::RangeImage img;
+  img.rows = 10;
+  img.columns = 3;
+  img.pose.camera_to_object = Eigen::Translation3d(5.0, 0.0, 0.0) * Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitX());
+  img.samples.assign(30, sp::RangeSample{});
+  img.acquired_rows.assign(10, 1);
+  for (int j = 0; j < 10; ++j)
+    for (int i = 0; i < 3; ++i) {
+      auto& s = img.samples[static_cast<std::size_t>(j * 3 + i)];
+      s.camera_mm = Eigen::Vector3f(float(i), float(2 * j - 9), -100.0f);
+      s.measured = j != 5;
+    }
+  img.acquired_rows[5] = 0;
+  // A view-frame y maps to object z = y (rotation by 90° about x), offset 5 mm in x.
+  const auto at_row = [](double j) { return Eigen::Vector3d(5.0, 100.0, 2.0 * j - 9.0); };
+  const std::vector<Eigen::Vector3d> points = {at_row(1), at_row(3.9), at_row(4.2), at_row(5), at_row(6.5), at_row(7.2), at_row(30)};
+  const std::vector<std::uint32_t> all = {0, 1, 2, 3, 4, 5, 6};
+  EXPECT_EQ(rows_passed_without_profile(img, points, all), (std::vector<std::uint32_t>{1, 2, 3, 4}));
+  img.acquired_rows[5] = 1;  // every profile came: nothing is passed
+  EXPECT_TRUE(rows_passed_without_profile(img, points, all).empty());
+  img.acquired_rows.assign(10, 0);  // one profile came: the rows' planes are unknown, every row was passed
+  img.acquired_rows[0] = 1;
+  for (std::size_t k = 3; k < img.samples.size(); ++k) img.samples[k].measured = false;
+  EXPECT_EQ(rows_passed_without_profile(img, points, all), all);
+  EXPECT_THROW(rows_passed_without_profile(img, points, {7}), sp::DataError);
+}
+
 TEST_F(SimCell, CubeJobMeasuresEverythingTheCellCanMeasure) {
   next_setup_min_area_mm2 = 100.0;  // the daemon's default
   const auto job = submit(write_cube(dir));
@@ -359,6 +390,9 @@ TEST_F(SimCell, RowsPredictedTwiceAndNeverMeasuredAreRetiredNotChased) {
 }
 
 TEST_F(SimCell, DriveFaultFaultsTheJobAndResumeFinishesWithoutRepeatingAView) {
+  // On a loaded host (ASan, two test processes on two cores) most sweeps lose profiles; the rows they passed
+  // are aimed at again rather than retired, which may take a round more than the default four.
+  max_rounds = 6;
   const auto job = submit(write_cube(dir));
   std::atomic<int> stop{0};
   auto r = runner();
@@ -384,7 +418,6 @@ TEST_F(SimCell, DriveFaultFaultsTheJobAndResumeFinishesWithoutRepeatingAView) {
   const auto result = nlohmann::json::parse(journal->job(job).result_json);
   if (::getenv("SCANCELL_TEST_VERBOSE"))
     for (const auto& e : journal->events(job)) std::cerr << e << "\n";
-  if (::getenv("TMPDIAG")) for (auto p : journal->plans(job)) for (const auto& sc : journal->scans(p)) { const sp::RangeImage img = sp::range_image_from_ply(journal->read_scan(sc), sc.file); Eigen::AlignedBox3f b; for (auto& x : img.samples) if (x.valid()) b.extend(x.object_mm); std::cerr << "plan " << p << " view " << sc.view << " " << sc.note << " box " << b.min().transpose() << " / " << b.max().transpose() << " cam " << img.pose.camera_to_object.translation().transpose() << "\n"; }
   EXPECT_LT(result["open_area_mm2"].get<double>(), 0.01 * result["rough_area_mm2"].get<double>());
   EXPECT_TRUE(journal->check().empty());
   const auto ev = journal->events(job);

@@ -1,4 +1,5 @@
 // Whole-pipeline tests: determinism across runs and thread counts, and the scancell command's contract.
+#include <algorithm>
 #include <atomic>
 #include <cstdio>
 #include <filesystem>
@@ -45,6 +46,33 @@ TEST(Plan, IdenticalForIdenticalInputsAndSeedAcrossThreadCounts) {
   EXPECT_GT(a["views"].size(), 5u);
   o.seed = 8;  // another seed, another rough model, another plan
   EXPECT_NE(a.dump(), plan_without_times(plan_views(mushroom_mm(), sensor, spec, {}, o, 2)).dump());
+}
+
+// Issue 15: each view's predicted rows (the closed loop's per-view evidence) make up the plan's predicted
+// rows, and a replan's leave out what is measured. The first view's rows are marked measured and planned again.
+TEST(Plan, PerViewPredictedRowsMakeUpThePredictedRowsAndSkipMeasuredOnes) {
+  RoughModelOptions o;
+  o.target_vertices = 600;
+  const auto sensor = testing::thesis_sensor();
+  const auto spec = testing::thesis_spec();
+  const auto union_of = [](const ViewPlan& p) {
+    std::vector<std::uint32_t> u;
+    for (const auto& rows : p.view_rows) u.insert(u.end(), rows.begin(), rows.end());
+    std::sort(u.begin(), u.end());
+    u.erase(std::unique(u.begin(), u.end()), u.end());
+    return u;
+  };
+  const ViewPlan p = plan_views(mushroom_mm(), sensor, spec, {}, o, 2);
+  ASSERT_EQ(p.view_rows.size(), p.views.size());
+  EXPECT_EQ(union_of(p), p.predicted_rows);
+  ASSERT_FALSE(p.view_rows.front().empty());
+  std::vector<std::uint8_t> measured(p.rough.size(), 0);
+  for (auto r : p.view_rows.front()) measured[r] = 1;
+  const ViewPlan q = plan_views(mushroom_mm(), sensor, spec, {}, o, 2, nullptr, &measured);
+  ASSERT_EQ(q.view_rows.size(), q.views.size());
+  EXPECT_EQ(union_of(q), q.predicted_rows);
+  for (const auto& rows : q.view_rows)
+    for (auto r : rows) EXPECT_FALSE(measured[r]) << "row " << r << " is measured and predicted again";
 }
 
 // Issue 16: planning stops at a stage boundary when its caller asks, naming where; nothing is returned.
