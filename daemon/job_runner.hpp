@@ -127,7 +127,7 @@ class JobRunner {
   void finish(Job& j, JobState state, const std::string& cause);
   /// Issue 20: the stable resting pose a second setup should use, for the result (planner::plan_next_setup).
   nlohmann::json next_setup(Job& j);
-  /// Every executed round's plan info, with the views that lost profiles (the closed loop's evidence).
+  /// Every executed round's plan info, with the rows its views' sweeps passed without a profile (held_rows).
   std::vector<nlohmann::json> round_infos(const Job& j);
   /// Keeps which of a view's predicted rows its sweep passed without a profile (not held against them).
   void note_lost_profiles(Job& j, std::int64_t plan, int view, const planner::RangeImage& img,
