@@ -14,32 +14,25 @@ namespace sp = scancell::planner;
 namespace dr = scancell::drivers;
 using Clock = std::chrono::steady_clock;
 
-Acquisition acquire_view(dr::Positioner& positioner, ScanHead& head, const sp::CellModel& cell,
-                         const sp::SensorModel& sensor, const sp::JointVector& q, double L, const JobSettings& settings,
-                         const std::atomic<int>& stop, const std::function<void(const std::string&)>& phase) {
-  if (q.size() != cell.axes.size())
-    throw sp::DataError(std::to_string(q.size()) + " axis targets for a cell of " + std::to_string(cell.axes.size()) + " axes");
-  const std::size_t sweep = cell.axis_index("sweep");
-  const double mid = q[sweep], start = mid - 0.5 * L, end = mid + 0.5 * L;
-  const int n_rows = sensor.samples_y, n_cols = sensor.samples_x;
-  if (phase) phase("moving");
-  // 1. Move to the start of the sweep, every axis together.
-  std::map<std::string, double> targets;
-  for (std::size_t a = 0; a < cell.axes.size(); ++a) targets[cell.axes[a].name] = a == sweep ? start : q[a];
-  positioner.move(targets, settings.move_timeout);
-  head.moved();
+namespace {
 
-  // 2. Sweep at the scan speed; fire one profile each time the sweep passes the next profile's position
-  //    (software position compare, as a drive's position-compare output would in hardware). The pose of each
-  //    profile is the kinematics at the position read back: what the camera really did, not what was planned.
-  const double speed = settings.scan_speed_mm_s > 0.0 ? settings.scan_speed_mm_s : cell.scan_speed_mm_s;
-  const double pitch = L / (n_rows - 1);
-  const auto sweep_timeout = std::chrono::milliseconds(static_cast<long>(2000.0 * L / speed)) + settings.move_timeout;
-  if (phase) phase("scanning");
+/// A trigger pulse fired during a sweep: the row it was for and the camera pose at the position read back.
+struct Fired {
+  int row;
+  Eigen::Isometry3d pose;
+};
+
+/// One pass of the sweep from where the sweep axis stands to `end` at `speed`, firing one pulse each time it
+/// passes the position of a row `wanted` marks (row r at `start` + r `pitch`) (software position compare, as a drive's
+/// position-compare output would in hardware). Rows passed between two reads of the position get no pulse.
+std::vector<Fired> sweep_pass(dr::Positioner& positioner, ScanHead& head, const sp::CellModel& cell, std::vector<double> qs,
+                              double start, double end, double pitch, const std::vector<std::uint8_t>& wanted,
+                              double speed, std::chrono::milliseconds timeout, const JobSettings& settings,
+                              const std::atomic<int>& stop) {
+  const std::size_t sweep = cell.axis_index("sweep");
+  const int n_rows = static_cast<int>(wanted.size());
   dr::Axis& sweep_axis = positioner.axis("sweep");
-  std::vector<double> qs = q;
-  std::vector<int> fired_rows;
-  std::vector<Eigen::Isometry3d> fired_pose;
+  std::vector<Fired> fired;
   int next = 0;
   auto fire_up_to = [&](double y) {
     // Positions come back in drive counts (1 µm): a profile is due within half a count of its place.
@@ -47,19 +40,19 @@ Acquisition acquire_view(dr::Positioner& positioner, ScanHead& head, const sp::C
     if (next >= n_rows || y < start + next * pitch - kCount) return;
     // Rows passed since the last read are lost; fire for the latest one only, at the position read.
     const int row = std::min(n_rows - 1, static_cast<int>(std::floor((y - start + kCount) / pitch)));
+    next = row + 1;
+    if (!wanted[static_cast<std::size_t>(row)]) return;
     qs[sweep] = y;
     const Eigen::Isometry3d pose = sp::forward_kinematics(cell, qs);
     head.camera_at(qs, pose);
     head.trigger().set(true);
     if (settings.trigger_width.count() > 0) std::this_thread::sleep_for(settings.trigger_width);
     head.trigger().set(false);
-    fired_rows.push_back(row);
-    fired_pose.push_back(pose);
-    next = row + 1;
+    fired.push_back({row, pose});
   };
   fire_up_to(sweep_axis.state().position);
   positioner.begin_move("sweep", end, speed);
-  const auto deadline = Clock::now() + sweep_timeout;
+  const auto deadline = Clock::now() + timeout;
   while (true) {
     const auto why = static_cast<StopRequest>(stop.load());
     if (why != StopRequest::none) {
@@ -75,46 +68,38 @@ Acquisition acquire_view(dr::Positioner& positioner, ScanHead& head, const sp::C
   }
   sweep_axis.finish_move(end, std::chrono::milliseconds(std::max<long>(100, std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count())));
   fire_up_to(sweep_axis.state().position);
+  return fired;
+}
 
-  // 3. Collect the profiles into the range image of the view (the nominal pose at mid-sweep; samples carry
-  //    their own measured positions in both frames).
-  sp::RangeImage img;
-  img.kind = sensor.kind;
-  img.columns = n_cols;
-  img.rows = n_rows;
-  qs[sweep] = mid;
-  img.pose.camera_to_object = sp::forward_kinematics(cell, qs);
-  img.pose.scan_length_mm = L;
-  img.samples.assign(static_cast<std::size_t>(n_cols) * n_rows, sp::RangeSample{});
-  bool with_truth = false;  // a simulated scanner's ground truth, carried beside the samples
+/// Reads the profiles answering `fired` into `img` (object frame from each pulse's pose, view frame from the
+/// image's nominal pose); returns how many arrived. Profiles are matched to rows by their pulse number, not
+/// by arrival: profile base + k answers the k-th pulse of this pass. A late profile of an earlier pass is
+/// skipped; one lost on the wire leaves its row unacquired, in its place.
+int collect_profiles(ScanHead& head, const std::vector<Fired>& fired, int n_cols, sp::RangeImage& img) {
   const Eigen::Isometry3d object_to_view = img.pose.camera_to_object.inverse();
-  img.acquired_rows.assign(static_cast<std::size_t>(n_rows), 0);
-  // Profiles are matched to rows by their pulse number, not by arrival: profile base + k answers the k-th
-  // pulse of this sweep. A late profile of an earlier sweep is skipped; one lost on the wire leaves its row
-  // unacquired, in its place.
   const std::uint64_t base = head.pulses;
-  head.pulses += fired_rows.size();
+  head.pulses += fired.size();
   int delivered = 0;
-  for (std::size_t expect = 0; expect < fired_rows.size();) {
+  for (std::size_t expect = 0; expect < fired.size();) {
     dr::Profile prof;
     try {
       prof = head.scanner().acquire(std::chrono::milliseconds(2000));
     } catch (const dr::DriverError& e) {
-      // The sweep's last frame lost on the wire leaves no later frame to count its profiles: what arrived
-      // stands and the rest are lost profiles (counted in lost_profiles). Nothing at all from the sweep is a
-      // fault (trigger, cable).
+      // The pass's last frame lost on the wire leaves no later frame to count its profiles: what arrived
+      // stands and the rest are lost profiles. Nothing at all from a pass is a fault (trigger, cable).
       if (e.kind != dr::DriverError::Kind::timeout || expect == 0) throw;
       break;
     }
     if (prof.index < base) continue;
     const std::size_t k = static_cast<std::size_t>(prof.index - base);
-    if (k >= fired_rows.size() || k < expect)
+    if (k >= fired.size() || k < expect)
       throw dr::DriverError(dr::DriverError::Kind::protocol, "scanner", "profile " + std::to_string(prof.index),
                             "out of order: this sweep fired pulses " + std::to_string(base) + " to " +
-                                std::to_string(base + fired_rows.size() - 1) + ", the next expected is " + std::to_string(base + expect));
+                                std::to_string(base + fired.size() - 1) + ", the next expected is " + std::to_string(base + expect));
     expect = k + 1;
     if (prof.lost) continue;
-    img.acquired_rows[static_cast<std::size_t>(fired_rows[k])] = 1;
+    const int row = fired[k].row;
+    img.acquired_rows[static_cast<std::size_t>(row)] = 1;
     ++delivered;
     if (prof.samples.size() != static_cast<std::size_t>(n_cols))
       throw dr::DriverError(dr::DriverError::Kind::protocol, "scanner", "profile " + std::to_string(prof.index),
@@ -124,18 +109,85 @@ Acquisition acquire_view(dr::Positioner& positioner, ScanHead& head, const sp::C
       if (!s.valid()) continue;
       // The scanner reports points in its own frame; where they are on the object is what the cell model
       // says the camera's pose was (the position read back at the trigger): a model error shows up here.
-      s.object_mm = (fired_pose[k] * s.camera_mm.cast<double>()).cast<float>();
+      s.object_mm = (fired[k].pose * s.camera_mm.cast<double>()).cast<float>();
       s.camera_mm = (object_to_view * s.object_mm.cast<double>()).cast<float>();
-      const std::size_t at = static_cast<std::size_t>(fired_rows[k]) * n_cols + i;
+      const std::size_t at = static_cast<std::size_t>(row) * n_cols + i;
       img.samples[at] = s;
       if (!prof.truth.empty()) {
-        if (!with_truth) img.truth.assign(img.samples.size(), sp::SampleTruth{});
-        with_truth = true;
+        if (img.truth.empty()) img.truth.assign(img.samples.size(), sp::SampleTruth{});
         img.truth[at] = prof.truth[static_cast<std::size_t>(i)];
       }
     }
   }
+  return delivered;
+}
+
+}  // namespace
+
+Acquisition acquire_view(dr::Positioner& positioner, ScanHead& head, const sp::CellModel& cell,
+                         const sp::SensorModel& sensor, const sp::JointVector& q, double L, const JobSettings& settings,
+                         const std::atomic<int>& stop, const std::function<void(const std::string&)>& phase) {
+  if (q.size() != cell.axes.size())
+    throw sp::DataError(std::to_string(q.size()) + " axis targets for a cell of " + std::to_string(cell.axes.size()) + " axes");
+  const std::size_t sweep = cell.axis_index("sweep");
+  const double mid = q[sweep], start = mid - 0.5 * L, end = mid + 0.5 * L;
+  const int n_rows = sensor.samples_y, n_cols = sensor.samples_x;
+  if (phase) phase("moving");
+  // 1. Move to the start of the sweep, every axis together.
+  std::map<std::string, double> targets;
+  for (std::size_t a = 0; a < cell.axes.size(); ++a) targets[cell.axes[a].name] = a == sweep ? start : q[a];
+  positioner.move(targets, settings.move_timeout);
+  head.moved();
+
+  // 2. The range image of the view (the nominal pose at mid-sweep; samples carry their own measured
+  //    positions in both frames), filled by the sweep's profiles. The pose of each profile is the kinematics
+  //    at the position read back: what the camera really did, not what was planned.
+  sp::RangeImage img;
+  img.kind = sensor.kind;
+  img.columns = n_cols;
+  img.rows = n_rows;
+  std::vector<double> qs = q;
+  qs[sweep] = mid;
+  img.pose.camera_to_object = sp::forward_kinematics(cell, qs);
+  img.pose.scan_length_mm = L;
+  img.samples.assign(static_cast<std::size_t>(n_cols) * n_rows, sp::RangeSample{});
+  img.acquired_rows.assign(static_cast<std::size_t>(n_rows), 0);
+
+  const double speed = settings.scan_speed_mm_s > 0.0 ? settings.scan_speed_mm_s : cell.scan_speed_mm_s;
+  const double pitch = L / (n_rows - 1);
+  const auto sweep_timeout = std::chrono::milliseconds(static_cast<long>(2000.0 * L / speed)) + settings.move_timeout;
+  if (phase) phase("scanning");
+  const std::vector<std::uint8_t> all(static_cast<std::size_t>(n_rows), 1);
+  int delivered = collect_profiles(head, sweep_pass(positioner, head, cell, q, start, end, pitch, all, speed, sweep_timeout, settings, stop), n_cols, img);
+
+  // 3. Fill sweeps: the rows the sweep passed without a profile are swept again, the sweep axis alone back to
+  //    the first of them (the other axes stay: the camera's pose is the same positioning), firing only at them.
+  //    A lost profile is a missed position compare or frame, not a property of the surface: nothing is left
+  //    missing that one more pass can take (a loaded host misses single profiles at high sweep speeds). Each
+  //    pass goes at half the speed of the one before: a host too slow to read the position once per profile
+  //    at one speed reads it twice as often per profile at half of it.
   Acquisition out;
+  double fill_speed = speed;
+  for (int fill = 1; fill <= settings.fill_sweeps && delivered < n_rows; ++fill) {
+    fill_speed *= 0.5;
+    std::vector<std::uint8_t> missing(static_cast<std::size_t>(n_rows));
+    int first = n_rows, last = -1;
+    for (int r = 0; r < n_rows; ++r) {
+      missing[static_cast<std::size_t>(r)] = !img.acquired_rows[static_cast<std::size_t>(r)];
+      if (missing[static_cast<std::size_t>(r)]) first = std::min(first, r), last = r;
+    }
+    // Over the missing rows' span only, from half a pitch before the first (so it is passed, not started on).
+    const double from = std::max(start, start + (first - 0.5) * pitch), to = std::min(end, start + (last + 0.5) * pitch);
+    if (phase) phase("moving");
+    positioner.move({{cell.axes[sweep].name, from}}, settings.move_timeout);
+    if (phase) phase("scanning");
+    const auto timeout = std::chrono::milliseconds(static_cast<long>(2000.0 * (to - from) / fill_speed)) + settings.move_timeout;
+    const int got = collect_profiles(head, sweep_pass(positioner, head, cell, q, start, to, pitch, missing, fill_speed, timeout, settings, stop),
+                                     n_cols, img);
+    out.filled_profiles += got;
+    delivered += got;
+    out.fill_sweeps = fill;
+  }
   out.lost_profiles = n_rows - delivered;
   out.image = std::move(img);
   return out;

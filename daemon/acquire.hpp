@@ -2,7 +2,8 @@
 // One view on the cell: every axis to the start of the sweep, then the sweep at the scan speed with one
 // trigger pulse each time the sweep passes the next profile position (software position compare; a drive's
 // position-compare output does this in hardware). Each profile's pose is the kinematics at the position read
-// back. Shared by the job runner and the calibration runs.
+// back. Rows the sweep passed without a profile are swept again (up to JobSettings::fill_sweeps passes, the
+// sweep axis alone back to the first of them, each at half the speed of the one before), firing only at them. Shared by the job runner and the calibration runs.
 #include <atomic>
 #include <functional>
 #include <cstdint>
@@ -15,7 +16,9 @@ namespace scancell::daemon {
 
 struct Acquisition {
   planner::RangeImage image;  // nominal pose at mid-sweep; samples carry their own measured positions
-  int lost_profiles = 0;      // rows without a profile: passed between two reads of the sweep, or lost by the scanner
+  int lost_profiles = 0;      // rows without a profile after every pass: passed between two reads, or lost by the scanner
+  int fill_sweeps = 0;        // passes after the first, for the rows it left without a profile (JobSettings::fill_sweeps)
+  int filled_profiles = 0;    // rows those passes acquired
 };
 
 /// `q`: the view's axis targets (sweep at the middle of its travel); `phase` is told "moving" and

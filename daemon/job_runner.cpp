@@ -997,7 +997,10 @@ void JobRunner::execute_view(Job& j, std::int64_t plan, const ViewRecord& v, con
   ++j.views_timed;
   j.progress.eta_s = j.view_seconds * static_cast<double>(j.planned_view_s.size() - static_cast<std::size_t>(v.index) - 1);
   j.progress.event = "view " + std::to_string(v.index + 1) + "/" + std::to_string(j.progress.views) + " stored: " +
-                     std::to_string(img.valid_count()) + " samples" + (lost ? ", " + std::to_string(lost) + " profiles missed" : "") +
+                     std::to_string(img.valid_count()) + " samples" + (got.fill_sweeps ? ", " + std::to_string(got.fill_sweeps) + " fill sweep" + (got.fill_sweeps > 1 ? "s" : "") + " took " +
+                                                 std::to_string(got.filled_profiles) + " profiles"
+                                           : "") +
+                     (lost ? ", " + std::to_string(lost) + " profiles missed" : "") +
                      registration + ", measured " + fmt(j.progress.measured) + " (" + fmt(secs, 2) + " s)";
   journal_.event(j.id, j.progress.event);
   report_(j.progress);

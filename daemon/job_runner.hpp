@@ -49,6 +49,8 @@ struct JobSettings {
   std::chrono::milliseconds move_timeout{60000};   // one positioning move
   double scan_speed_mm_s = 0.0;                    // sweep speed; 0: the cell's scan_speed_mm_s
   std::chrono::microseconds trigger_width{0};      // scanner trigger pulse width
+  /// Passes after a view's sweep for the rows it left without a profile (daemon/acquire): 0 keeps the holes.
+  int fill_sweeps = 2;
   int planner_threads = 0;
   bool register_views = true;                      // ICP each executed view against the model before counting it
   planner::IcpOptions icp = [] {

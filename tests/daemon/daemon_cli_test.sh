@@ -37,6 +37,9 @@ out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
 write_config "{driver: sim_gige, profiles_per_frame: 4096}" "$JOBS}"
 out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
 [ $rc = 4 ] && echo "$out" | grep -q "scanner.profiles_per_frame" || fail "profiles_per_frame out of range: exit $rc: $out"
+write_config "{driver: sim}" "$JOBS, fill_sweeps: 9}"
+out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
+[ $rc = 4 ] && echo "$out" | grep -q "jobs.fill_sweeps: must be in \[0, 5\]" || fail "fill_sweeps out of range: exit $rc: $out"
 write_config "{driver: sim}" "$JOBS}"
 printf 'rough_scan:\n  tilts_rad: [1.15, x]\n' >> "$W/scancelld.yaml"
 out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?

@@ -6,6 +6,7 @@
 #include <fstream>
 #include <iostream>
 #include <optional>
+#include <set>
 #include <sstream>
 #include <thread>
 
@@ -192,6 +193,89 @@ TEST(LostProfiles, RowsInOrBesideALostProfileArePassedTheRestAreNot) {
   EXPECT_THROW(rows_passed_without_profile(img, points, {7}), sp::DataError);
 }
 
+/// A head whose scanner loses the first profile fired at each of chosen rows (a frame lost on the wire), the
+/// sim head's otherwise. The row of a pulse is read from the sweep position it was fired at.
+struct LossyHead : ScanHead, drivers::Scanner {
+  std::unique_ptr<ScanHead> inner;
+  std::set<int> lose_rows;
+  double start_mm = 0.0, pitch_mm = 1.0;
+  std::size_t sweep = 4;
+  std::vector<int> fired_row;  // per pulse
+  std::set<int> lost;
+  dr::DigitalOutput& trigger() override { return inner->trigger(); }
+  dr::Scanner& scanner() override { return *this; }
+  void camera_at(const sp::JointVector& q, const Eigen::Isometry3d& m) override {
+    fired_row.push_back(static_cast<int>(std::floor((q[sweep] - start_mm + 5e-4) / pitch_mm)));
+    inner->camera_at(q, m);
+  }
+  void moved() override { inner->moved(); }
+  dr::Profile acquire(std::chrono::milliseconds timeout) override {
+    dr::Profile p = inner->scanner().acquire(timeout);
+    const int row = fired_row.at(p.index);
+    if (lose_rows.count(row) && lost.insert(row).second) {
+      p.lost = true;
+      p.samples.clear();
+    }
+    return p;
+  }
+};
+
+// A view's sweep whose profiles of rows 40-44 and 100 never arrive: the sweep axis returns and sweeps again
+// firing only at the rows left without a profile, and they land where they belong (between their neighbours in
+// the view frame, on the row-index line of the first pass). With fill_sweeps 0 the holes stay and are counted.
+TEST_F(SimCell, FillSweepsTakeTheProfilesASweepMissedAndOnlyThose) {
+  sp::TriangleMesh cube = sp::load_mesh(write_cube(dir));
+  for (auto& v : cube.vertices) v -= Eigen::Vector3d(25, 25, 0);
+  const double L = 60.0;
+  const sp::IkResult ik = sp::look_at(models.cell, Eigen::Vector3d(25, 0, 25), 160.0, 0.0, 0.0, L);
+  ASSERT_TRUE(ik.ok) << ik.why;
+  const auto take = [&](int fills) {
+    LossyHead head;
+    head.inner = make_sim_head(models.sensor, cube, cube.triangles.size(), 7, &models.cell, nullptr);
+    head.lose_rows = {40, 41, 42, 43, 44, 100};
+    head.sweep = models.cell.axis_index("sweep");
+    head.start_mm = ik.q[head.sweep] - 0.5 * L;
+    head.pitch_mm = L / 255.0;
+    JobSettings s;
+    s.scan_speed_mm_s = scan_speed;
+    s.fill_sweeps = fills;
+    std::atomic<int> stop{0};
+    Acquisition a = acquire_view(io->positioner, head, models.cell, models.sensor, ik.q, L, s, stop);
+    return std::make_pair(a, head.pulses);
+  };
+  const auto [got, pulses] = take(2);
+  const sp::RangeImage& img = got.image;
+  ASSERT_GE(got.fill_sweeps, 1);
+  EXPECT_GE(got.filled_profiles, 6);
+  // Only the missing rows are fired again: a pass over every row would fire 256 more.
+  EXPECT_LT(pulses, 256u + 64u);
+  EXPECT_EQ(got.lost_profiles, 256 - static_cast<int>(std::count(img.acquired_rows.begin(), img.acquired_rows.end(), 1)));
+  const auto mean_y = [&](int j) {
+    double y = 0;
+    int k = 0;
+    for (int i = 0; i < img.columns; ++i)
+      if (img.at(i, j).valid()) {
+        y += img.at(i, j).camera_mm.y();
+        ++k;
+      }
+    return k ? y / k : std::nan("");
+  };
+  const double pitch = L / 255.0;
+  for (const int j : {40, 41, 42, 43, 44, 100}) {
+    ASSERT_TRUE(img.acquired_rows[static_cast<std::size_t>(j)]) << "row " << j;
+    // The view frame's y runs along the sweep: row j sits at -L/2 + j pitch (fired at the position read
+    // back, so up to a pitch beyond it).
+    const double y = mean_y(j), want = -0.5 * L + j * pitch;
+    EXPECT_GT(y, want - 0.2 * pitch) << "row " << j;
+    EXPECT_LT(y, want + 1.2 * pitch) << "row " << j;
+  }
+  const auto [kept, kept_pulses] = take(0);
+  EXPECT_EQ(kept.fill_sweeps, 0);
+  EXPECT_GE(kept.lost_profiles, 6);
+  for (const int j : {40, 41, 42, 43, 44, 100}) EXPECT_FALSE(kept.image.acquired_rows[static_cast<std::size_t>(j)]) << "row " << j;
+  EXPECT_LE(kept_pulses, 256u);
+}
+
 TEST_F(SimCell, CubeJobMeasuresEverythingTheCellCanMeasure) {
   next_setup_min_area_mm2 = 100.0;  // the daemon's default
   const auto job = submit(write_cube(dir));
@@ -354,7 +438,7 @@ TEST_F(SimCell, RowsPredictedTwiceAndNeverMeasuredAreRetiredNotChased) {
   EXPECT_EQ(r.run(job, stop), JobState::stalled) << journal->job(job).cause;
   const auto result = nlohmann::json::parse(journal->job(job).result_json);
   for (const auto& e : journal->events(job))
-    if (e.rfind("round ", 0) == 0 || e.rfind("stalled", 0) == 0) std::cout << e << "\n";
+    if (e.rfind("round ", 0) == 0 || e.rfind("stalled", 0) == 0 || e.find("fill") != std::string::npos) std::cout << e << "\n";
   EXPECT_LT(result["rounds"].get<int>(), 6);  // stopped before max_rounds
   EXPECT_GT(result["needs_attention_rows"].get<int>(), 0);
   // The stop names the same rows the result counts.
