@@ -6,6 +6,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstring>
+#include <vector>
 
 namespace scancell::drivers {
 
@@ -23,6 +24,23 @@ DriverError refused(const std::string& where, const std::string& why) {
   const std::string msg = e && e->message ? e->message : "unknown Aravis error";
   if (e) g_error_free(e);
   throw DriverError(kind, kDev, where, msg + hint);
+}
+
+/// Aravis opens a device by its address, MAC, user-defined name or "vendor-serial" / "vendor-model-serial";
+/// a bare serial number (what is printed on the scanner) is looked up among the discovered devices here.
+/// Returns the Aravis id of the one device with that serial number, or empty when none has it.
+std::string serial_to_device_id(const std::string& serial) {
+  arv_update_device_list();
+  std::vector<std::string> found;
+  for (unsigned i = 0; i < arv_get_n_devices(); ++i) {
+    const char* id = arv_get_device_id(i);
+    const char* sn = arv_get_device_serial_nbr(i);
+    if (id && sn && serial == sn) found.emplace_back(id);
+  }
+  if (found.size() > 1)
+    throw refused("opening '" + serial + "'", std::to_string(found.size()) + " devices have this serial number (" + found[0] + ", " +
+                                                 found[1] + "): name one by address in scanner.device");
+  return found.empty() ? std::string() : found[0];
 }
 
 }  // namespace
@@ -53,7 +71,8 @@ struct GenicamScanner::Impl {
   gulong lost_handler = 0;
   static void on_control_lost(ArvDevice*, gpointer self) { static_cast<Impl*>(self)->control_lost = true; }
   ~Impl() {
-    if (camera) arv_camera_stop_acquisition(camera, nullptr);
+    // A device that is gone is not told to stop: every GVCP retry would wait out its timeout.
+    if (camera && !control_lost) arv_camera_stop_acquisition(camera, nullptr);
     if (device && lost_handler) g_signal_handler_disconnect(device, lost_handler);
     if (stream) g_object_unref(stream);
     if (camera) g_object_unref(camera);
@@ -102,7 +121,17 @@ GenicamScanner::GenicamScanner(planner::SensorModel sensor, GenicamConfig config
   check_genicam_config(config_);
   if (sensor_.kind != planner::SensorKind::line_scan) throw refused("sensor model", "a GenICam line-profile scanner needs a line_scan sensor model");
   GError* e = nullptr;
-  impl_->camera = arv_camera_new(config_.device.c_str(), &e);
+  info_.id = config_.device;
+  impl_->camera = arv_camera_new(info_.id.c_str(), &e);
+  if (!impl_->camera) {
+    // Not an id Aravis knows: a bare serial number is looked up (one more discovery, only on this path).
+    const std::string by_serial = serial_to_device_id(config_.device);
+    if (!by_serial.empty()) {
+      g_clear_error(&e);
+      info_.id = by_serial;
+      impl_->camera = arv_camera_new(info_.id.c_str(), &e);
+    }
+  }
   if (!impl_->camera)
     throw_gerror(e, DriverError::Kind::connection, "opening '" + config_.device + "'",
                  " (check scanner.device, the network route to the scanner, and that no other program holds it)");
@@ -111,7 +140,6 @@ GenicamScanner::GenicamScanner(planner::SensorModel sensor, GenicamConfig config
   Impl& d = *impl_;
   info_.vendor = d.has("DeviceVendorName") ? d.get_string("DeviceVendorName") : "";
   info_.model = d.has("DeviceModelName") ? d.get_string("DeviceModelName") : "";
-  info_.id = config_.device;
 
   // Image geometry: one line per profile, one column per ray (+ the counter marks).
   const int width = sensor_.samples_x + config_.mark_columns;
@@ -168,6 +196,7 @@ GenicamScanner::GenicamScanner(planner::SensorModel sensor, GenicamConfig config
     if (xe) throw_gerror(xe, DriverError::Kind::refused, "setting ExposureTime", " (check scanner.exposure_us)");
   }
   if (config_.packet_size_bytes > 0) d.set_int("GevSCPSPacketSize", config_.packet_size_bytes, "scanner.packet_size_bytes");
+  if (d.has("GevSCPSPacketSize")) info_.packet_size_bytes = static_cast<int>(d.get_int("GevSCPSPacketSize"));
   if (d.has("AcquisitionMode")) d.set_enum("AcquisitionMode", "Continuous", "scanner");
 
   d.stream = arv_camera_create_stream(d.camera, nullptr, nullptr, &e);

@@ -34,8 +34,10 @@ void check_genicam_config(const GenicamConfig& config, const std::string& key_pa
 
 /// What the device stated when it was opened (its features, after configuration).
 struct GenicamDeviceInfo {
-  std::string vendor, model, id, pixel_format;
+  std::string vendor, model, pixel_format;
+  std::string id;  // what the device was opened by: scanner.device, or the Aravis id a bare serial number resolved to
   int width = 0, height = 0;
+  int packet_size_bytes = 0;  // GevSCPSPacketSize as the device reads it back (0: not a GigE Vision device)
   double scale_mm = 0.0, offset_mm = 0.0, invalid_value = 0.0;
   bool has_invalid_value = false;
 };

@@ -17,6 +17,8 @@ namespace scancell::drivers {
 
 namespace {
 
+// GigE Vision bootstrap registers (GigE Vision 2.0, table 28-1): the user-defined name, 16 bytes.
+constexpr std::uint32_t kUserNameRegister = 0x00E8, kUserNameSize = 16;
 constexpr std::uint32_t kScaleRegister = 0x1000, kOffsetRegister = 0x1008, kInvalidRegister = 0x1010, kUnitRegister = 0x1018;
 
 void write_be_double(ArvFakeCamera* cam, std::uint32_t address, double v) {
@@ -53,7 +55,7 @@ struct SimGigeScanner::Impl {
   std::chrono::steady_clock::time_point last_edge = std::chrono::steady_clock::now();
   int drop = 0;
   std::uint64_t sent = 0, next_index = 0;
-  bool level = false, stop = false;
+  bool level = false, stop = false, acquiring = false;
   std::thread worker;
 
   Impl(planner::SensorModel s, const planner::TriangleMesh& m, std::function<Eigen::Isometry3d()> p, SimGigeOptions o)
@@ -105,6 +107,7 @@ struct SimGigeScanner::Impl {
     std::unique_lock<std::mutex> lock(mu);
     while (!stop) {
       cv.wait_for(lock, std::chrono::milliseconds(1), [&] { return stop || !pending.empty(); });
+      if (reg(ARV_FAKE_CAMERA_REGISTER_ACQUISITION) == 0) acquiring = false;  // stopped: the next start restarts the counter
       while (!pending.empty()) {
         const Edge e = pending.front();
         pending.pop_front();
@@ -165,7 +168,17 @@ SimGigeScanner::SimGigeScanner(planner::SensorModel sensor, const planner::Trian
   if (fd < 0) throw DriverError(DriverError::Kind::connection, "sim scanner", "GenICam XML", "cannot create a temporary file");
   close(fd);
   d.xml_path = path;
-  std::ofstream(d.xml_path) << kScancellLineScannerXml;
+  std::string xml = kScancellLineScannerXml;
+  if (!d.options.offer_coord3d) {
+    // A Mono16-only device: its PixelFormat enumeration has no Coord3D_C16 entry.
+    const auto at = xml.find("<EnumEntry Name=\"Coord3D_C16\"");
+    if (at != std::string::npos) xml.erase(at, xml.find("</EnumEntry>", at) + 12 - at);
+  }
+  if (d.options.user_id.size() > 15 || d.options.serial.empty() || d.options.serial.size() > 15) {
+    std::remove(d.xml_path.c_str());
+    throw DriverError(DriverError::Kind::refused, "sim scanner", "options", "serial (1 to 15 characters) or user_id (up to 15) too long");
+  }
+  std::ofstream(d.xml_path) << xml;
   d.gv = arv_gv_fake_camera_new_full(d.options.interface.c_str(), d.options.serial.c_str(), d.xml_path.c_str());
   if (!d.gv || !arv_gv_fake_camera_is_running(d.gv)) {
     if (d.gv) g_object_unref(d.gv);
@@ -180,7 +193,14 @@ SimGigeScanner::SimGigeScanner(planner::SensorModel sensor, const planner::Trian
   arv_fake_camera_write_register(d.cam, kUnitRegister, 0);  // Millimeter
   arv_fake_camera_write_register(d.cam, ARV_FAKE_CAMERA_REGISTER_WIDTH, static_cast<guint32>(d.sensor.samples_x + 2));
   arv_fake_camera_write_register(d.cam, ARV_FAKE_CAMERA_REGISTER_HEIGHT, 16);
-  arv_fake_camera_write_register(d.cam, ARV_FAKE_CAMERA_REGISTER_PIXEL_FORMAT, 0x011000B8u  /* Coord3D_C16 (PFNC) */);
+  arv_fake_camera_write_register(d.cam, ARV_FAKE_CAMERA_REGISTER_PIXEL_FORMAT,
+                                 d.options.offer_coord3d ? 0x011000B8u /* Coord3D_C16 (PFNC) */ : 0x01100007u /* Mono16 */);
+  if (!d.options.user_id.empty()) {
+    // The user-defined name of the bootstrap registers: discovery answers with it, so a driver can open by it.
+    char name[kUserNameSize] = {};
+    std::memcpy(name, d.options.user_id.data(), d.options.user_id.size());
+    arv_fake_camera_write_memory(d.cam, kUserNameRegister, sizeof name, name);
+  }
   arv_fake_camera_set_trigger_frequency(d.cam, d.options.line_rate_hz);
   arv_fake_camera_set_fill_pattern(d.cam, &Impl::fill, impl_.get());
   d.worker = std::thread([this] { impl_->loop(); });
@@ -204,6 +224,19 @@ void SimGigeScanner::set(bool level) {
   const Eigen::Isometry3d p = impl_->pose();
   {
     std::lock_guard<std::mutex> lock(impl_->mu);
+    // Like a real scanner: no acquisition, no profile; the trigger counter restarts with each acquisition
+    // (a driver opened afresh counts from 0), and what an earlier one left unsent is gone.
+    if (impl_->reg(ARV_FAKE_CAMERA_REGISTER_ACQUISITION) == 0) {
+      impl_->acquiring = false;
+      return;
+    }
+    if (!impl_->acquiring) {
+      impl_->acquiring = true;
+      impl_->next_index = 0;
+      impl_->pending.clear();
+      impl_->lines.clear();
+      impl_->frames.clear();
+    }
     impl_->pending.push_back({impl_->next_index++, p});
     impl_->last_edge = std::chrono::steady_clock::now();
   }

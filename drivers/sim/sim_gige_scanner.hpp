@@ -27,7 +27,9 @@ namespace scancell::drivers {
 
 struct SimGigeOptions {
   std::string interface = "127.0.0.1";   // an interface address or name (GVCP port 3956; one device each)
-  std::string serial = "SIM0001";        // the device id a driver opens is "scancell-<serial>" or the address
+  std::string serial = "SIM0001";        // a driver opens it by this, by "Aravis-<serial>", the user id or the address
+  std::string user_id;                   // GigE Vision user-defined name (up to 15 characters); empty: none
+  bool offer_coord3d = true;             // false: PixelFormat offers Mono16 only (the driver needs a configured scale)
   double scale_mm = 0.01;                // Scan3dCoordinateScale: mm per range count (reach 655 mm)
   double offset_mm = 0.0;                // Scan3dCoordinateOffset
   std::uint16_t invalid_value = 0;       // Scan3dInvalidDataValue: no return

@@ -24,14 +24,20 @@ struct Cell {
   sp::TriangleMesh plane;
   std::atomic<double> sweep{0.0};
   std::unique_ptr<dr::SimGigeScanner> device;
-  Cell() {
+  dr::SimGigeOptions options;
+  explicit Cell(dr::SimGigeOptions o = {}) : options(std::move(o)) {
     plane.vertices = {{-300, -300, 0}, {300, -300, 0}, {300, 300, 0}, {-300, 300, 0}};
     plane.triangles = {{0, 1, 2}, {0, 2, 3}};
+    restart();
+  }
+  /// The device (again): a scanner powered up.
+  void restart() {
+    device.reset();
     device = std::make_unique<dr::SimGigeScanner>(sensor, plane, [this] {
       Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
       t.translation() = Eigen::Vector3d(0, sweep.load(), 200);
       return t;
-    });
+    }, options);
   }
   void pulses(int n) {
     for (int k = 0; k < n; ++k) {
@@ -136,4 +142,115 @@ TEST(GenicamScanner, FeaturesAndSettingsOutOfRangeAreRefusedByName) {
   sp::SensorModel far = cell.sensor;
   far.range_max_mm = 1000.0;  // 65534 counts x 0.01 mm = 655 mm: the device cannot report R_max
   refused(cell.config(), far, "16-bit range reaches");
+}
+
+TEST(GenicamScanner, OpensTheDeviceByAddressSerialNumberOrUserId) {
+  dr::SimGigeOptions o;
+  o.serial = "SN48151623";
+  o.user_id = "cell-a-scanner";
+  Cell cell(o);
+  for (const std::string id : {"127.0.0.1", "SN48151623", "cell-a-scanner"}) {
+    dr::GenicamConfig c = cell.config();
+    c.device = id;
+    dr::GenicamScanner scanner(cell.sensor, c);
+    EXPECT_EQ(scanner.device().vendor, "Aravis") << id;
+    // A bare serial number resolves to the id Aravis knows the device by; the others are opened as given.
+    EXPECT_EQ(scanner.device().id, id == "SN48151623" ? "Aravis-Fake-SN48151623" : id);
+    // Each opening starts an acquisition, and the device's trigger counter with it.
+    cell.pulses(3);
+    for (int k = 0; k < 3; ++k) {
+      const dr::Profile p = scanner.acquire(2000ms);
+      EXPECT_EQ(p.index, static_cast<std::uint64_t>(k)) << id;
+      EXPECT_FALSE(p.lost) << id;
+    }
+  }
+  dr::GenicamConfig c = cell.config();
+  c.device = "SN99999999";
+  try {
+    dr::GenicamScanner scanner(cell.sensor, c);
+    FAIL() << "opened a device that is not there";
+  } catch (const dr::DriverError& e) {
+    EXPECT_EQ(e.kind, dr::DriverError::Kind::connection);
+    EXPECT_THAT(e.what(), HasSubstr("opening 'SN99999999'"));
+    EXPECT_THAT(e.what(), HasSubstr("check scanner.device"));
+  }
+}
+
+// The scanner loses power mid-job: the driver says so (connection, not a silent stream of timeouts) once
+// GigE Vision's heartbeat gives up on it, and a scanner that comes back is opened afresh and delivers.
+TEST(GenicamScanner, ADeviceThatDisappearsIsAConnectionErrorAndOneThatReturnsOpensAgain) {
+  Cell cell;
+  {
+    dr::GenicamScanner scanner(cell.sensor, cell.config());
+    cell.device.reset();
+    const auto t0 = std::chrono::steady_clock::now();
+    dr::DriverError::Kind kind = dr::DriverError::Kind::timeout;
+    std::string what;
+    while (kind == dr::DriverError::Kind::timeout && std::chrono::steady_clock::now() - t0 < 20s) {
+      try {
+        scanner.acquire(500ms);
+        FAIL() << "a profile from a device that is gone";
+      } catch (const dr::DriverError& e) {
+        kind = e.kind;
+        what = e.what();
+      }
+    }
+    EXPECT_EQ(kind, dr::DriverError::Kind::connection) << what;
+    EXPECT_THAT(what, HasSubstr("stopped answering"));
+  }
+  cell.restart();
+  dr::GenicamScanner scanner(cell.sensor, cell.config());
+  cell.pulses(4);
+  for (int k = 0; k < 4; ++k) {
+    const dr::Profile p = scanner.acquire(2000ms);
+    EXPECT_EQ(p.index, static_cast<std::uint64_t>(k));
+    EXPECT_FALSE(p.lost);
+  }
+}
+
+// A device without Coord3D_C16 (range data as plain Mono16): refused unless the scale is configured, then
+// the same plane at 200 mm.
+TEST(GenicamScanner, Mono16RangeDataNeedsAConfiguredScale) {
+  dr::SimGigeOptions o;
+  o.offer_coord3d = false;
+  Cell cell(o);
+  try {
+    dr::GenicamScanner scanner(cell.sensor, cell.config());
+    FAIL() << "Mono16 accepted without a scale";
+  } catch (const dr::DriverError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("Mono16 range data needs scanner.mono16_scale_mm > 0"));
+  }
+  dr::GenicamConfig c = cell.config();
+  c.mono16_scale_mm = 0.01;
+  dr::GenicamScanner scanner(cell.sensor, c);
+  EXPECT_EQ(scanner.device().pixel_format, "Mono16");
+  cell.pulses(2);
+  const double sigma = cell.sensor.noise_cz_per_mm * 200.0 * 200.0;
+  for (int k = 0; k < 2; ++k) {
+    const dr::Profile p = scanner.acquire(2000ms);
+    double sum = 0.0;
+    int n = 0;
+    for (const auto& s : p.samples)
+      if (s.valid()) sum += s.camera_mm.z(), ++n;
+    EXPECT_EQ(n, cell.sensor.samples_x);
+    EXPECT_NEAR(sum / n, -200.0, 5.0 * sigma / std::sqrt(n) + 0.005);
+  }
+}
+
+// GevSCPSPacketSize: the smallest packet the standard allows splits each 16-line frame (8256 bytes) into 15
+// packets; the device reads the size back and every profile still arrives, in order.
+TEST(GenicamScanner, ThePacketSizeIsSetAndFramesArriveWhole) {
+  Cell cell;
+  dr::GenicamConfig c = cell.config();
+  c.packet_size_bytes = 576;
+  dr::GenicamScanner scanner(cell.sensor, c);
+  EXPECT_EQ(scanner.device().packet_size_bytes, 576);
+  cell.pulses(32);
+  for (int k = 0; k < 32; ++k) {
+    const dr::Profile p = scanner.acquire(2000ms);
+    ASSERT_EQ(p.index, static_cast<std::uint64_t>(k));
+    ASSERT_FALSE(p.lost) << k;
+  }
+  EXPECT_EQ(scanner.counters().incomplete_frames, 0u);
+  EXPECT_EQ(scanner.counters().frames, 2u);
 }
