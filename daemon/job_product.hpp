@@ -12,42 +12,26 @@
 #include "daemon/journal.hpp"
 #include "planner/config.hpp"
 #include "planner/geometry/mesh.hpp"
+#include "planner/reconstruction/product.hpp"
 #include "planner/scan/range_image.hpp"
 
 namespace scancell::daemon {
 
-struct CloudSummary {
-  std::size_t points = 0;  // spec-compliant samples written
-  std::size_t views = 0;   // stored views they come from (the rough scan's and failed registrations excluded)
-  std::vector<Eigen::Vector3d> positions, normals;  // the samples written (object frame, mm), when asked for
-};
-
+using planner::CloudSummary;
+using planner::ModelSummary;
 /// A stored view of the job's plan rounds that counts (its registration did not fail), as read back.
-struct StoredView {
-  planner::RangeImage image;
-  int view = 0, round = 0;  // index within its round's plan; round (0, 1, ...)
-};
+using StoredView = planner::ProductView;
 
 /// Every counting view of `job`'s plan rounds (not the rough scan's), in round and view order.
 std::vector<StoredView> load_job_views(Journal& journal, std::int64_t job);
 
-/// `file` (jobs/<id>/cloud.ply): binary little-endian PLY, one vertex per sample that meets the spec
-/// (σz ≤ precision, local density ≥ density, thesis eq. 3.4/3.8) in the object frame, as registered and
-/// stored: x y z (mm), nx ny nz (unit normal from its image neighbours, towards the scanner; 0 0 0 where a
-/// neighbour is missing), sigma_z_mm, view (index within its round's plan), round. Written durably (a
-/// reader sees the previous file or the whole new one); rewritten after each round and at the end.
+/// `file` (jobs/<id>/cloud.ply): planner::cloud_ply, written durably (a reader sees the previous file or the
+/// whole new one); rewritten after each round and at the end.
 CloudSummary write_job_cloud(const std::vector<StoredView>& views, std::int64_t job, const planner::ModelSpec& spec,
                              const std::filesystem::path& file, bool keep_samples = false);
 
-struct ModelSummary {
-  std::size_t vertices = 0, triangles = 0, boundary_edges = 0;  // boundary: edges of the holes left open
-  double voxel_mm = 0.0;
-  std::vector<Eigen::Vector3d> positions;  // the model's vertices (object frame, mm)
-};
-
-/// `file` (jobs/<id>/model.ply): the surface fused from the cloud's samples at a voxel of half the spec's
-/// sample spacing, 1/(2√ρ) (planner::mesh_from_oriented_points: OpenVDB sparse field, VolumeToMesh), open
-/// where nothing was measured; per-vertex `support`. Written durably.
+/// `file` (jobs/<id>/model.ply): planner::fuse_model of the cloud (kept with its samples), per-vertex
+/// `support`, written durably.
 ModelSummary write_job_model(const CloudSummary& cloud, const planner::ModelSpec& spec, const std::filesystem::path& file);
 
 /// `file` (jobs/<id>/report.json, issue 19): the inspection report. The signed deviation of the cloud's

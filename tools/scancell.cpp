@@ -1,8 +1,10 @@
 // scancell: command-line front end of the planner.
 //   scancell plan --mesh M --sensor S --spec P [--settings X] --out plan.json [options]
+#include <algorithm>
 #include <charconv>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <map>
@@ -19,6 +21,7 @@
 #include "planner/plan.hpp"
 #include "planner/placement.hpp"
 #include "planner/plan_file.hpp"
+#include "planner/reconstruction/product.hpp"
 #include "planner/sim/verify.hpp"
 
 namespace sp = scancell::planner;
@@ -76,7 +79,10 @@ const char* kVerifyUsage =
     "  one view of the plan through the virtual scanner, saved as a range image (docs/range-image-format.md)\n"
     "usage: scancell pose-error --sensor SENSOR.yaml [--cell CELL.yaml] [--sigma-p-mm S] [--sigma-a-rad S]\n"
     "       [--sigma-t-rad S] [--fd F]\n"
-    "  expected relative precision, density, footprint and depth-of-field erosion, suggested f_d, countermeasures\n";
+    "  expected relative precision, density, footprint and depth-of-field erosion, suggested f_d, countermeasures\n"
+    "usage: scancell fuse --scans PATH[,PATH...] --spec SPEC.yaml --out MODEL.ply [--cloud CLOUD.ply]\n"
+    "  the job's product offline: range images (files, or every .ply in a directory, in name order) fused into\n"
+    "  the surface model (open where nothing was measured); --cloud also writes the spec-compliant samples\n";
 
 /// Simple --key value parser that refuses unknown or repeated options.
 std::map<std::string, std::string> parse(int argc, char** argv, const std::vector<std::string>& with_value,
@@ -346,6 +352,64 @@ int cmd_scan(int argc, char** argv) {
   return 0;
 }
 
+/// Writes bytes to a temporary file and renames, so a reader never sees half a file.
+void write_bytes(const std::string& out, const std::string& bytes) {
+  const std::string tmp = out + ".tmp";
+  {
+    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
+    if (!f) throw std::runtime_error(out + ": cannot open for writing");
+    f.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+    if (!f.flush()) throw std::runtime_error(out + ": write failed");
+  }
+  if (std::rename(tmp.c_str(), out.c_str()) != 0) throw std::runtime_error(out + ": cannot rename " + tmp + ": " + std::strerror(errno));
+}
+
+/// The range-image files `--scans` names: files as given, directories' .ply files in name order.
+std::vector<std::filesystem::path> scan_files(const std::string& list) {
+  std::vector<std::filesystem::path> out;
+  std::stringstream ss(list);
+  for (std::string item; std::getline(ss, item, ',');) {
+    if (item.empty()) throw UsageError("--scans: an empty path in '" + list + "'");
+    const std::filesystem::path p(item);
+    if (std::filesystem::is_directory(p)) {
+      std::vector<std::filesystem::path> in;
+      for (const auto& e : std::filesystem::directory_iterator(p))
+        if (e.is_regular_file() && e.path().extension() == ".ply") in.push_back(e.path());
+      if (in.empty()) throw UsageError("--scans: no .ply range images in " + item);
+      std::sort(in.begin(), in.end());
+      out.insert(out.end(), in.begin(), in.end());
+    } else {
+      out.push_back(p);
+    }
+  }
+  return out;
+}
+
+int cmd_fuse(int argc, char** argv) {
+  const auto o = parse(argc, argv, {"--scans", "--spec", "--out", "--cloud"}, {});
+  for (const char* k : {"--scans", "--spec", "--out"})
+    if (!o.count(k)) throw UsageError(std::string("missing ") + k);
+  const sp::ModelSpec spec = sp::load_spec(o.at("--spec"));
+  std::vector<sp::ProductView> views;
+  for (const auto& f : scan_files(o.at("--scans"))) {
+    sp::ProductView v;
+    v.image = sp::load_range_image(f);  // a damaged file: DataError naming it
+    if (v.image.valid_count() == 0) throw sp::DataError(f.string() + ": no samples (an empty range image; leave it out)");
+    v.view = static_cast<int>(views.size());
+    views.push_back(std::move(v));
+  }
+  sp::CloudSummary cloud;
+  const std::string cloud_bytes = sp::cloud_ply(views, 0, spec, cloud, true);
+  sp::ModelSummary model;
+  const sp::SurfaceMesh m = sp::fuse_model(cloud, spec, model);
+  write_bytes(o.at("--out"), sp::surface_ply(m));
+  if (o.count("--cloud")) write_bytes(o.at("--cloud"), cloud_bytes);
+  std::cout << views.size() << " range images, " << cloud.points << " spec-compliant samples -> " << o.at("--out") << ": "
+            << model.vertices << " vertices, " << model.triangles << " triangles, " << model.boundary_edges
+            << " open edges (unmeasured holes left open), voxel " << model.voxel_mm << " mm\n";
+  return 0;
+}
+
 int cmd_pose_error(int argc, char** argv) {
   const auto o = parse(argc, argv, {"--sensor", "--cell", "--fd", "--sigma-p-mm", "--sigma-a-rad", "--sigma-t-rad"}, {});
   if (!o.count("--sensor")) throw UsageError("missing --sensor");
@@ -370,7 +434,8 @@ int main(int argc, char** argv) {
                  "  plan    plan the views that measure an object to a specification\n"
                  "  verify  execute a plan with the virtual scanner on the fine model: verified measurability\n"
                  "  scan    one view of a plan through the virtual scanner, saved as a range image\n"
-                 "  pose-error  the thesis' single-view pose-error effects (tables 7.3-7.5) for a sensor and cell\n\n"
+                 "  pose-error  the thesis' single-view pose-error effects (tables 7.3-7.5) for a sensor and cell\n"
+                 "  fuse    range images fused into the object's surface model (the job's product, offline)\n\n"
               << kPlanUsage << kVerifyUsage;
     return argc < 2 ? 2 : 0;
   }
@@ -385,6 +450,7 @@ int main(int argc, char** argv) {
     if (cmd == "verify") return cmd_verify(argc - 2, argv + 2);
     if (cmd == "scan") return cmd_scan(argc - 2, argv + 2);
     if (cmd == "pose-error") return cmd_pose_error(argc - 2, argv + 2);
+    if (cmd == "fuse") return cmd_fuse(argc - 2, argv + 2);
     std::cerr << "scancell: unknown command '" << cmd << "'\n";
     return 2;
   } catch (const UsageError& e) {

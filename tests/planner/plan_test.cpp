@@ -1,7 +1,9 @@
 // Whole-pipeline tests: determinism across runs and thread counts, and the scancell command's contract.
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 
@@ -10,6 +12,8 @@
 
 #include "planner/errors.hpp"
 #include "planner/plan.hpp"
+#include "planner/geometry/scene.hpp"
+#include "planner/sim/virtual_scanner.hpp"
 #include "test_meshes.hpp"
 
 namespace scancell::planner {
@@ -183,6 +187,75 @@ TEST_F(Cli, RefusesBadOptions) {
   r = run(base_args(testing::source_path("tests/data/mushroom.off"), out) + " --segments " + seg.string());
   EXPECT_THAT(r.output, HasSubstr("label 1 'x' is not an integer"));
   EXPECT_FALSE(fs::exists(out));
+}
+
+// scancell fuse: two overlapping face-on views of a 60 mm flat patch (z = 0) at the optimal standoff, saved
+// as range images, fused offline into the model: its vertices lie on the plane within twice the thesis
+// sensor's σz (0.010 mm at 142 mm; the spec's precision is 0.05 mm), it is open around the patch's border (nothing invented beyond it), and the cloud
+// holds every spec-compliant sample. A damaged file and an empty image are refused, named, with no model.
+TEST_F(Cli, FuseMakesTheModelFromRangeImagesAndRefusesDamagedOrEmptyOnes) {
+  const SensorModel sensor = testing::thesis_sensor();
+  const TriangleMesh patch = testing::flat_patch(60.0, 2.0);
+  const OcclusionScene scene(patch);
+  fs::create_directories(dir_ / "scans");
+  for (int k = 0; k < 2; ++k) {
+    ScanPose pose;
+    pose.camera_to_object = Eigen::Isometry3d::Identity();
+    pose.camera_to_object.translation() = Eigen::Vector3d(-8.0 + 16.0 * k, 0.0, sensor.optimal_standoff_mm);
+    pose.scan_length_mm = 40.0;
+    ScanOptions o;
+    o.seed = 3 + k;
+    save_range_image(virtual_scan(scene, sensor, pose, o), dir_ / "scans" / ("view" + std::to_string(k) + ".ply"));
+  }
+  const std::string spec = testing::source_path("config/spec/thesis.yaml");
+  const fs::path model = dir_ / "model.ply", cloud = dir_ / "cloud.ply";
+  CommandResult r = run("fuse --scans " + (dir_ / "scans").string() + " --spec " + spec + " --out " + model.string() +
+                        " --cloud " + cloud.string());
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("2 range images"));
+  // The model: binary PLY, x y z float first in each vertex.
+  std::ifstream mf(model, std::ios::binary);
+  const std::string mb((std::istreambuf_iterator<char>(mf)), std::istreambuf_iterator<char>());
+  const std::size_t nv = std::stoul(mb.substr(mb.find("element vertex ") + 15));
+  ASSERT_GT(nv, 1000u);
+  std::size_t stride = 0;
+  for (std::size_t at = mb.find("property float"); at < mb.find("element face"); at = mb.find("property float", at + 1)) stride += 4;
+  const std::size_t body = mb.find("end_header\n") + 11;
+  double ss = 0.0, max_x = -1e9, min_x = 1e9;
+  for (std::size_t k = 0; k < nv; ++k) {
+    float v[3];
+    std::memcpy(v, mb.data() + body + stride * k, sizeof v);
+    ss += double(v[2]) * v[2];
+    max_x = std::max(max_x, double(v[0]));
+    min_x = std::min(min_x, double(v[0]));
+  }
+  EXPECT_LT(std::sqrt(ss / nv), 0.02);  // 0.013 measured: σz's averaging, less at the open border
+  // Both views in it (each covers about 20 mm across x, 16 mm apart), nothing beyond the patch.
+  EXPECT_LT(min_x, -12.0);
+  EXPECT_GT(max_x, 12.0);
+  EXPECT_LT(max_x, 30.5);
+  EXPECT_THAT(r.output, ::testing::ContainsRegex("[1-9][0-9]* open edges"));
+  std::ifstream cf(cloud, std::ios::binary);
+  const std::string cb((std::istreambuf_iterator<char>(cf)), std::istreambuf_iterator<char>());
+  EXPECT_THAT(cb, HasSubstr("property float sigma_z_mm"));
+  EXPECT_GT(std::stoul(cb.substr(cb.find("element vertex ") + 15)), 10000u);
+
+  // Bad input: named, exit 5 (data error), no model written.
+  fs::remove(model);
+  std::ofstream(dir_ / "scans" / "view2.ply") << "ply\nformat ascii 1.0\nend_header\n";
+  r = run("fuse --scans " + (dir_ / "scans").string() + " --spec " + spec + " --out " + model.string());
+  EXPECT_EQ(r.status, 5) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("view2.ply"));
+  EXPECT_FALSE(fs::exists(model));
+  RangeImage empty = load_range_image(dir_ / "scans" / "view0.ply");
+  for (auto& smp : empty.samples) smp.measured = false;
+  save_range_image(empty, dir_ / "empty.ply");
+  r = run("fuse --scans " + (dir_ / "scans" / "view0.ply").string() + "," + (dir_ / "empty.ply").string() + " --spec " + spec +
+          " --out " + model.string());
+  EXPECT_EQ(r.status, 5) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("empty.ply: no samples"));
+  EXPECT_FALSE(fs::exists(model));
+  EXPECT_EQ(run("fuse --scans " + (dir_ / "scans").string() + " --out " + model.string()).status, 2);  // no --spec
 }
 
 TEST_F(Cli, WritesADocumentedPlan) {
