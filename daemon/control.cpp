@@ -37,6 +37,7 @@ const std::map<std::string, std::map<std::string, Field>>& schema() {
                   {"rough_vertices", {Type::integer, false}}, {"placement", {Type::string, false}}}},
       {"status", {{"job", {Type::integer, false}}}},
       {"list", {}},
+      {"record", {{"job", {Type::integer, true}}}},
       {"watch", {{"job", {Type::integer, true}}}},
       {"pause", {{"job", {Type::integer, true}}}},
       {"resume", {{"job", {Type::integer, true}}}},

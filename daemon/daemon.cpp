@@ -327,6 +327,24 @@ json Daemon::handle(const json& req, const std::function<bool(const json&)>& sen
     if (cur && last_.job == cur) o["progress"] = progress_json(last_);
     return o;
   }
+  if (cmd == "record") {
+    // What a job did, from the journal: its events, and per plan round the views (axis targets, poses) and
+    // the stored scans (absolute paths; a note where one does not count). scancellctl export copies it out.
+    const JobRecord j = job_of();
+    json plans = json::array();
+    for (const auto& [plan, round] : journal_->plan_rounds(j.id)) {
+      json views = json::array(), scans = json::array();
+      for (const auto& v : journal_->views(plan)) views.push_back(json::parse(v.pose_json));
+      for (const auto& s : journal_->scans(plan))
+        scans.push_back({{"view", s.view}, {"file", (journal_->data_dir() / s.file).string()}, {"bytes", s.bytes}, {"note", s.note}});
+      plans.push_back({{"plan", plan}, {"round", round}, {"info", json::parse(journal_->plan_info(plan))}, {"views", views}, {"scans", scans}});
+    }
+    json o = job_json(j);
+    o["request"] = json::parse(j.request_json);
+    o["events"] = journal_->events(j.id);
+    o["plans"] = plans;
+    return o;
+  }
   if (cmd == "list") {
     json a = json::array();
     for (const auto& j : journal_->jobs(100)) a.push_back(job_json(j));

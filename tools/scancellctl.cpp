@@ -2,8 +2,9 @@
 //   scancellctl [--socket PATH] [--json] submit --mesh FILE [--fit-mm L] [--spec FILE] [--settings FILE]
 //                                          [--truth FILE] [--rough-vertices N] [--placement auto|as_given] [--watch]
 //   scancellctl status [JOB] | list | watch JOB | pause JOB | resume JOB | abort JOB | reload
+//   scancellctl export JOB --out DIR [--with-scans]
 //   scancellctl calibrate sensor|turntable_axis|positioner [--watch]
-// Exit codes: 0 success (watch: the job is done), 1 the daemon refused the request, 2 usage, 3 cannot reach
+// Exit codes: 0 success (watch: the job is done), 1 the daemon refused the request (export: or the copy failed), 2 usage, 3 cannot reach
 // the daemon; watch: 10 stalled, 11 aborted, 12 faulted, 13 paused, 14 failed (a calibration on bad data).
 #include <cerrno>
 #include <chrono>
@@ -12,8 +13,10 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <iostream>
 #include <string>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
@@ -186,10 +189,91 @@ int watch(Connection& c, std::int64_t job, bool as_json) {
   }
 }
 
+/// Every string in `v` (at `key`) naming an existing regular file by its absolute path.
+void named_files(const json& v, const std::string& key, std::vector<std::pair<std::string, std::string>>& out) {
+  if (v.is_object()) {
+    for (auto it = v.begin(); it != v.end(); ++it) named_files(it.value(), key.empty() ? it.key() : key + "." + it.key(), out);
+  } else if (v.is_array()) {
+    for (std::size_t k = 0; k < v.size(); ++k) named_files(v[k], key + "[" + std::to_string(k) + "]", out);
+  } else if (v.is_string()) {
+    const std::string s = v.get<std::string>();
+    std::error_code ec;
+    if (!s.empty() && s[0] == '/' && std::filesystem::is_regular_file(s, ec)) out.emplace_back(key, s);
+  }
+}
+
+void write_text(const std::filesystem::path& file, const std::string& text) {
+  std::ofstream f(file, std::ios::binary | std::ios::trunc);
+  if (!(f << text) || !f.flush()) throw std::filesystem::filesystem_error("cannot write", file, std::make_error_code(std::errc::io_error));
+}
+
+/// scancellctl export: a finished job's product, plans and events copied into `dir` (docs/daemon.md).
+int export_job(Connection& c, std::int64_t job, const std::filesystem::path& dir, bool with_scans) {
+  namespace fs = std::filesystem;
+  c.send({{"cmd", "record"}, {"job", job}});
+  json rec = c.receive();
+  if (!rec.value("ok", false)) {
+    std::cerr << "scancellctl: " << rec.value("error", "refused") << "\n";
+    return 1;
+  }
+  const std::string state = rec.value("state", "");
+  if (state != "done" && state != "stalled" && state != "aborted" && state != "failed") {
+    std::cerr << "scancellctl: job " << job << " is " << state
+              << ": its product is written when it ends (wait for it, or resume or abort it), then export it\n";
+    return 1;
+  }
+  std::error_code ec;
+  if (fs::exists(dir, ec) && !(fs::is_directory(dir, ec) && fs::is_empty(dir, ec))) {
+    std::cerr << "scancellctl: " << dir.string() << " exists and is not an empty directory: export into a new one\n";
+    return 1;
+  }
+  try {
+    fs::create_directories(dir);
+    std::vector<std::pair<std::string, std::string>> files;
+    if (rec.contains("result")) named_files(rec["result"], "", files);
+    json exported = json::object();
+    for (const auto& [key, path] : files) {
+      std::string name = fs::path(path).filename().string();
+      if (fs::exists(dir / name)) name = key + "_" + name;
+      fs::copy_file(path, dir / name);
+      exported[key] = name;
+    }
+    std::size_t scans = 0;
+    if (with_scans) {
+      fs::create_directories(dir / "scans");
+      for (auto& p : rec["plans"]) {
+        const int round = p["round"].get<int>();
+        for (auto& s : p["scans"]) {
+          const std::string name = (round < 0 ? std::string("rough") : "round" + std::to_string(round)) + "_view" +
+                                   std::to_string(s["view"].get<int>()) + ".ply";
+          fs::copy_file(s["file"].get<std::string>(), dir / "scans" / name);
+          s["exported"] = "scans/" + name;
+          ++scans;
+        }
+      }
+    }
+    std::string events;
+    for (const auto& e : rec["events"]) events += e.get<std::string>() + "\n";
+    write_text(dir / "events.txt", events);
+    write_text(dir / "plans.json", rec["plans"].dump(2) + "\n");
+    rec.erase("ok");
+    rec.erase("events");
+    rec.erase("plans");
+    rec["exported"] = exported;
+    write_text(dir / "job.json", rec.dump(2) + "\n");
+    std::cout << "job " << job << " (" << state << ") exported to " << dir.string() << ": " << files.size() << " files"
+              << (with_scans ? ", " + std::to_string(scans) + " range images" : std::string()) << ", job.json, plans.json, events.txt\n";
+    return 0;
+  } catch (const fs::filesystem_error& e) {
+    std::cerr << "scancellctl: export: " << e.what() << "\n";
+    return 1;
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"scancellctl: control scancelld (submit, status, list, watch, pause, resume, abort, reload)"};
+  CLI::App app{"scancellctl: control scancelld (submit, status, list, watch, pause, resume, abort, reload, export)"};
   const char* env = std::getenv("SCANCELL_SOCKET");
   std::string socket = env ? env : "/run/scancell/control.sock";
   bool as_json = false;
@@ -233,6 +317,12 @@ int main(int argc, char** argv) {
     ctl[k]->add_option("job", job, "job id")->required();
   }
   app.add_subcommand("reload", "re-read the calibration (sensor and cell models)");
+  std::string out_dir;
+  bool with_scans = false;
+  auto* exp = app.add_subcommand("export", "copy a finished job's product (cloud, model, report, pictures), plans and events into a directory");
+  exp->add_option("job", job, "job id")->required();
+  exp->add_option("--out", out_dir, "a new or empty directory")->required();
+  exp->add_flag("--with-scans", with_scans, "also the stored range images (scans/, what scancell fuse reads)");
   std::string kind;
   auto* calibrate = app.add_subcommand("calibrate", "run a calibration on the cell (its target must be on the table)");
   calibrate->add_option("kind", kind, "sensor | turntable_axis | positioner")->required()->check(CLI::IsMember({"sensor", "turntable_axis", "positioner"}));
@@ -247,6 +337,7 @@ int main(int argc, char** argv) {
     Connection c(socket);
     const std::string cmd = app.get_subcommands().front()->get_name();
     if (cmd == "watch") return watch(c, job, as_json);
+    if (cmd == "export") return export_job(c, job, out_dir, with_scans);
     json req = {{"cmd", cmd}};
     if (cmd == "submit") {
       if (mesh.empty() == bbox.empty()) {

@@ -108,6 +108,18 @@ ctl abort 1 > /dev/null || fail "abort"
 ctl watch 1 > "$W/watch2.log"; rc=$?
 [ $rc = 11 ] || fail "watch after abort: exit $rc, want 11 (aborted)"
 out=$(ctl abort 1 2>&1); [ $? = 1 ] && echo "$out" | grep -q "already aborted" || fail "second abort: $out"
+# Issue 19: the aborted job hands over what it measured: its product, plans, events and range images.
+out=$(ctl export 1 --out "$W/export1" --with-scans 2>&1) || fail "export: $out"
+for f in cloud.ply model.ply job.json plans.json events.txt; do [ -s "$W/export1/$f" ] || fail "export lacks $f: $out"; done
+grep -q '"state": "aborted"' "$W/export1/job.json" || fail "exported job.json: $(head -c 400 "$W/export1/job.json")"
+grep -q '"cloud": "cloud.ply"' "$W/export1/job.json" || fail "exported job.json names no cloud"
+grep -q "aborted" "$W/export1/events.txt" || fail "exported events lack the abort"
+[ "$(ls "$W/export1/scans" | wc -l)" -ge 3 ] || fail "export --with-scans: $(ls "$W/export1/scans" | wc -l) range images"
+# ... and is what scancell fuse reads.
+out=$("$BUILD/tools/scancell" fuse --scans "$W/export1/scans" --spec "$SRC/config/spec/thesis.yaml" --out "$W/fused.ply" 2>&1) || fail "fuse of the exported scans: $out"
+[ -s "$W/fused.ply" ] || fail "fuse wrote no model: $out"
+out=$(ctl export 1 --out "$W/export1" 2>&1); [ $? = 1 ] && echo "$out" | grep -q "not an empty directory" || fail "export over a full directory: $out"
+out=$(ctl export 99 --out "$W/export99" 2>&1); [ $? = 1 ] && echo "$out" | grep -q "no job 99" || fail "export of an unknown job: $out"
 
 # 5. A calibration run as a daemon job: the turntable axis from a sphere (the simulated cell's is nominal).
 out=$(ctl calibrate lens 2>&1); [ $? = 2 ] || fail "unknown calibration kind accepted: $out"
