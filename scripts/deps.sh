@@ -11,6 +11,7 @@ PKGS=(
   libmodbus-dev mbpoll libgpiod-dev libsqlite3-dev zlib1g-dev
   liblcm-dev liblcm-bin iproute2 libsystemd-dev libcli11-dev libnanoflann-dev
   libaravis-dev libusb-1.0-0-dev libopenvdb-dev libboost-dev
+  gnuplot-nox
 )
 # `scripts/deps.sh fuzz` (make fuzz): clang and its libFuzzer runtime as well.
 [ "${1:-}" = fuzz ] && PKGS+=(clang libclang-rt-14-dev)

@@ -23,6 +23,7 @@
 #include "planner/plan_file.hpp"
 #include "planner/reconstruction/product.hpp"
 #include "planner/sim/verify.hpp"
+#include "tools/plan_picture.hpp"
 
 namespace sp = scancell::planner;
 
@@ -52,6 +53,8 @@ const char* kPlanUsage =
     "  --placement auto|as-given with --cell: auto plans the object's most probable stable resting poses on the\n"
     "                            plate and keeps the one measuring the most area with the fewest views\n"
     "                            (settings placement.*); as-given (default) keeps the mesh's +z up\n"
+    "  --png FILE.png            the plan as a picture: rows predicted measured or left, each view's camera\n"
+    "                            numbered in execution order, boresight and scan path (needs gnuplot)\n"
     "  --quiet                   no summary table\n";
 
 const char* kVerifyUsage =
@@ -136,7 +139,7 @@ int cmd_plan(int argc, char** argv) {
   const auto o = parse(argc, argv,
                        {"--mesh", "--sensor", "--spec", "--settings", "--out", "--scale", "--fit-mm", "--rough-vertices",
                         "--rho-rel", "--rough-noise-mm", "--seed", "--cover", "--threads", "--segments", "--cell",
-                        "--calibration", "--placement"},
+                        "--calibration", "--placement", "--png"},
                        {"--quiet"});
   for (const char* k : {"--mesh", "--sensor", "--spec", "--out"})
     if (!o.count(k)) throw UsageError(std::string("missing ") + k);
@@ -221,6 +224,7 @@ int cmd_plan(int argc, char** argv) {
     std::cerr << "scancell: decimator rejected " << plan.rough_report.faces_rejected_by_decimator << " non-manifold faces\n";
 
   write_json(o.at("--out"), sp::plan_to_json(plan));
+  if (o.count("--png")) scancell::tools::write_plan_png(plan, std::filesystem::path(source.mesh_path).filename().string(), o.at("--png"));
   if (!o.count("--quiet")) std::cout << sp::plan_summary(plan);
   return 0;
 }

@@ -261,9 +261,23 @@ TEST_F(Cli, FuseMakesTheModelFromRangeImagesAndRefusesDamagedOrEmptyOnes) {
 TEST_F(Cli, WritesADocumentedPlan) {
   const fs::path out = dir_ / "plan.json";
   const CommandResult r = run(base_args(testing::source_path("tests/data/mushroom.off"), out) +
-                    " --fit-mm 200 --rough-vertices 600 --settings " + testing::source_path("config/planner/default.yaml"));
+                    " --fit-mm 200 --rough-vertices 600 --settings " + testing::source_path("config/planner/default.yaml") +
+                    " --png " + (dir_ / "plan.png").string());
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_THAT(r.output, HasSubstr("estimated measurability"));
+  // The picture (issue 19): a PNG 1600 x 820 (IHDR, big-endian), drawn (a blank one is a few kB), whole.
+  std::ifstream pf(dir_ / "plan.png", std::ios::binary);
+  const std::string png((std::istreambuf_iterator<char>(pf)), std::istreambuf_iterator<char>());
+  ASSERT_GT(png.size(), 24u);
+  EXPECT_EQ(png.substr(0, 8), std::string("\x89PNG\r\n\x1a\n", 8));
+  const auto be32 = [&](std::size_t at) {
+    return (std::uint32_t(std::uint8_t(png[at])) << 24) | (std::uint32_t(std::uint8_t(png[at + 1])) << 16) |
+           (std::uint32_t(std::uint8_t(png[at + 2])) << 8) | std::uint32_t(std::uint8_t(png[at + 3]));
+  };
+  EXPECT_EQ(be32(16), 1600u);
+  EXPECT_EQ(be32(20), 820u);
+  EXPECT_GT(png.size(), 50000u);
+  EXPECT_FALSE(fs::exists(dir_ / "plan.png.tmp"));
   std::ifstream in(out);
   const auto j = nlohmann::json::parse(in);
   EXPECT_EQ(j["format"], "scancell-plan");
