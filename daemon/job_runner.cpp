@@ -180,61 +180,7 @@ std::vector<std::string> view_records(const sp::ViewPlan& p) {
   return out;
 }
 
-sp::TriangleMesh load_object(const std::string& path, double fit_mm, const std::atomic<int>* cancel = nullptr) {
-  sp::TriangleMesh m = sp::load_mesh(path, nullptr, std::chrono::milliseconds(30000), cancel);
-  if (fit_mm > 0.0) sp::apply_scale(m, sp::fit_scale(m, fit_mm));
-  return m;
-}
-
 }  // namespace
-
-json JobRequest::to_json() const {
-  json j = {{"mesh", mesh}};
-  if (fit_mm > 0.0) j["fit_mm"] = fit_mm;
-  if (!spec.empty()) j["spec"] = spec;
-  if (!settings.empty()) j["settings"] = settings;
-  if (!truth.empty()) j["truth"] = truth;
-  if (rough_vertices) j["rough_vertices"] = *rough_vertices;
-  if (bbox_mm) j["bbox_mm"] = {bbox_mm->x(), bbox_mm->y(), bbox_mm->z()};
-  if (!placement.empty()) j["placement"] = placement;
-  return j;
-}
-
-JobRequest JobRequest::from_json(const json& j) {
-  JobRequest r;
-  r.mesh = j.value("mesh", std::string());
-  if (j.contains("bbox_mm")) {
-    const auto v = j["bbox_mm"].get<std::vector<double>>();
-    if (v.size() != 3) throw std::invalid_argument("bbox_mm: three sizes (x, y, z mm)");
-    r.bbox_mm = Eigen::Vector3d(v[0], v[1], v[2]);
-  }
-  r.fit_mm = j.value("fit_mm", 0.0);
-  r.spec = j.value("spec", std::string());
-  r.settings = j.value("settings", std::string());
-  r.truth = j.value("truth", std::string());
-  if (j.contains("rough_vertices")) r.rough_vertices = j["rough_vertices"].get<std::size_t>();
-  r.placement = j.value("placement", std::string());
-  return r;
-}
-
-void validate_request(const JobRequest& r, const std::atomic<int>* cancel) {
-  if (!r.mesh.empty() && r.bbox_mm)
-    throw std::invalid_argument("submit: 'mesh' and 'bbox_mm' both given; give a rough model or a bounding box to rough-scan, not both");
-  if (r.mesh.empty() && !r.bbox_mm) throw std::invalid_argument("submit: give 'mesh' (a rough model) or 'bbox_mm' (start with a rough scan)");
-  if (r.bbox_mm && !(r.bbox_mm->minCoeff() > 0.0 && r.bbox_mm->maxCoeff() < 1000.0))
-    throw std::invalid_argument("submit: 'bbox_mm' sizes must be in (0, 1000) mm");
-  if (!(r.fit_mm >= 0.0) || !std::isfinite(r.fit_mm)) throw std::invalid_argument("submit: 'fit_mm' must be > 0");
-  if (!r.bbox_mm && r.rough_vertices && (*r.rough_vertices < 50 || *r.rough_vertices > 200000))
-    throw std::invalid_argument("submit: 'rough_vertices' must be in [50, 200000]");
-  if (!r.placement.empty() && r.placement != "auto" && r.placement != "as_given")
-    throw std::invalid_argument("submit: 'placement' must be auto or as_given");
-  if (r.bbox_mm && r.placement == "auto")
-    throw std::invalid_argument("submit: 'placement' auto needs a mesh; a bounding-box job's object already stands on the table");
-  if (!r.mesh.empty()) load_object(r.mesh, r.fit_mm, cancel);
-  if (!r.truth.empty()) load_object(r.truth, r.fit_mm, cancel);
-  if (!r.spec.empty()) sp::load_spec(r.spec);
-  if (!r.settings.empty()) sp::load_planner_settings(r.settings);
-}
 
 struct JobRunner::Job {
   std::int64_t id = 0;

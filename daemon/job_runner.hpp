@@ -18,6 +18,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "daemon/job_request.hpp"
 #include "daemon/journal.hpp"
 #include "daemon/phase_trace.hpp"
 #include "drivers/axis.hpp"
@@ -75,27 +76,6 @@ struct CellModels {
   planner::ModelSpec spec;
   planner::PlannerSettings settings;
 };
-
-/// What a submit request asks for, validated (files loaded) before the job is accepted.
-struct JobRequest {
-  std::string mesh;                    // rough model of the object (absolute path)
-  double fit_mm = 0.0;                 // scale so the longest side is this (0: the mesh is in mm)
-  std::string spec, settings;          // optional overrides (absolute paths)
-  std::string truth;                   // simulation: the object actually on the table (default: mesh)
-  std::optional<std::size_t> rough_vertices;
-  /// Instead of a mesh: the object's approximate size (x, y, z mm), standing centred on the turntable. The
-  /// job then starts with a rough scan and plans from the rough model it fuses.
-  std::optional<Eigen::Vector3d> bbox_mm;
-  /// How the object rests on the plate: "auto" (plan its stable resting poses, keep the best; the operator
-  /// places it as the result says), "as_given", or empty for the settings' placement.mode.
-  std::string placement;
-  nlohmann::json to_json() const;
-  static JobRequest from_json(const nlohmann::json& j);
-};
-
-/// Loads and checks everything a request names; throws planner::MeshError/ConfigError naming the file. A
-/// non-zero `cancel` stops a mesh read at once (MeshError): the daemon stopping does not wait for it.
-void validate_request(const JobRequest& r, const std::atomic<int>* cancel = nullptr);
 
 struct Progress {
   std::int64_t job = 0;
