@@ -25,9 +25,9 @@ std::vector<StoredView> load_job_views(Journal& journal, std::int64_t job) {
 }
 
 CloudSummary write_job_cloud(const std::vector<StoredView>& views, std::int64_t job, const sp::ModelSpec& spec,
-                             const std::filesystem::path& file, bool keep_samples) {
+                             const std::filesystem::path& file, bool keep_samples, double spacing_mm) {
   CloudSummary sum;
-  const std::string bytes = sp::cloud_ply(views, job, spec, sum, keep_samples);
+  const std::string bytes = sp::cloud_ply(views, job, spec, sum, keep_samples, spacing_mm);
   std::filesystem::create_directories(file.parent_path());
   write_file_durably(file, bytes);
   return sum;

@@ -28,7 +28,7 @@ std::vector<StoredView> load_job_views(Journal& journal, std::int64_t job);
 /// `file` (jobs/<id>/cloud.ply): planner::cloud_ply, written durably (a reader sees the previous file or the
 /// whole new one); rewritten after each round and at the end.
 CloudSummary write_job_cloud(const std::vector<StoredView>& views, std::int64_t job, const planner::ModelSpec& spec,
-                             const std::filesystem::path& file, bool keep_samples = false);
+                             const std::filesystem::path& file, bool keep_samples = false, double spacing_mm = 0.0);
 
 /// `file` (jobs/<id>/model.ply): planner::fuse_model of the cloud (kept with its samples), per-vertex
 /// `support`, written durably.

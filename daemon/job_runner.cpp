@@ -298,7 +298,7 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
   if (views > 0) {
     const auto cloud = settings_.jobs_dir / std::to_string(j.id) / "cloud.ply";
     try {
-      const CloudSummary& c = product_cloud.emplace(write_job_cloud(stored, j.id, j.spec, cloud, true));
+      const CloudSummary& c = product_cloud.emplace(write_job_cloud(stored, j.id, j.spec, cloud, true, settings_.cloud_spacing_mm));
       result["cloud"] = cloud.string();
       result["cloud_points"] = c.points;
       const auto model = cloud.parent_path() / "model.ply";
@@ -628,7 +628,8 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
       {
         // Kept current after each round: the registered cloud so far (durable, like the scans).
         const CloudSummary c =
-            write_job_cloud(load_job_views(journal_, id), id, j.spec, settings_.jobs_dir / std::to_string(id) / "cloud.ply");
+            write_job_cloud(load_job_views(journal_, id), id, j.spec, settings_.jobs_dir / std::to_string(id) / "cloud.ply", false,
+                            settings_.cloud_spacing_mm);
         journal_.event(id, "round " + std::to_string(j.round) + ": cloud.ply holds " + std::to_string(c.points) +
                                " spec-compliant samples from " + std::to_string(c.views) + " views");
       }

@@ -52,6 +52,9 @@ struct JobSettings {
   std::chrono::microseconds trigger_width{0};      // scanner trigger pulse width
   /// Passes after a view's sweep for the rows it left without a profile (daemon/acquire): 0 keeps the holes.
   int fill_sweeps = 2;
+  /// cloud.ply: one sample per cube of this side (mm); 0 keeps every spec-compliant sample. The model is
+  /// fused from all of them either way.
+  double cloud_spacing_mm = 0.0;
   int planner_threads = 0;
   bool register_views = true;                      // ICP each executed view against the model before counting it
   planner::IcpOptions icp = [] {

@@ -84,8 +84,10 @@ const char* kVerifyUsage =
     "       [--sigma-t-rad S] [--fd F]\n"
     "  expected relative precision, density, footprint and depth-of-field erosion, suggested f_d, countermeasures\n"
     "usage: scancell fuse --scans PATH[,PATH...] --spec SPEC.yaml --out MODEL.ply [--cloud CLOUD.ply]\n"
+    "       [--cloud-spacing-mm S]\n"
     "  the job's product offline: range images (files, or every .ply in a directory, in name order) fused into\n"
-    "  the surface model (open where nothing was measured); --cloud also writes the spec-compliant samples\n";
+    "  the surface model (open where nothing was measured); --cloud also writes the spec-compliant samples\n"
+    "  (--cloud-spacing-mm: one per cube of that side; the model uses all of them)\n";
 
 /// Simple --key value parser that refuses unknown or repeated options.
 std::map<std::string, std::string> parse(int argc, char** argv, const std::vector<std::string>& with_value,
@@ -390,7 +392,7 @@ std::vector<std::filesystem::path> scan_files(const std::string& list) {
 }
 
 int cmd_fuse(int argc, char** argv) {
-  const auto o = parse(argc, argv, {"--scans", "--spec", "--out", "--cloud"}, {});
+  const auto o = parse(argc, argv, {"--scans", "--spec", "--out", "--cloud", "--cloud-spacing-mm"}, {});
   for (const char* k : {"--scans", "--spec", "--out"})
     if (!o.count(k)) throw UsageError(std::string("missing ") + k);
   const sp::ModelSpec spec = sp::load_spec(o.at("--spec"));
@@ -403,12 +405,15 @@ int cmd_fuse(int argc, char** argv) {
     views.push_back(std::move(v));
   }
   sp::CloudSummary cloud;
-  const std::string cloud_bytes = sp::cloud_ply(views, 0, spec, cloud, true);
+  const double spacing = o.count("--cloud-spacing-mm") ? number(o, "--cloud-spacing-mm") : 0.0;
+  if (!(spacing >= 0.0 && spacing <= 10.0)) throw UsageError("--cloud-spacing-mm must be in [0, 10] mm (0 keeps every sample)");
+  const std::string cloud_bytes = sp::cloud_ply(views, 0, spec, cloud, true, spacing);
   sp::ModelSummary model;
   const sp::SurfaceMesh m = sp::fuse_model(cloud, spec, model);
   write_bytes(o.at("--out"), sp::surface_ply(m));
   if (o.count("--cloud")) write_bytes(o.at("--cloud"), cloud_bytes);
-  std::cout << views.size() << " range images, " << cloud.points << " spec-compliant samples -> " << o.at("--out") << ": "
+  std::cout << views.size() << " range images, " << cloud.compliant << " spec-compliant samples ("
+            << cloud.points << " in the cloud) -> " << o.at("--out") << ": "
             << model.vertices << " vertices, " << model.triangles << " triangles, " << model.boundary_edges
             << " open edges (unmeasured holes left open), voxel " << model.voxel_mm << " mm\n";
   return 0;

@@ -21,7 +21,8 @@ struct ProductView {
 };
 
 struct CloudSummary {
-  std::size_t points = 0;  // spec-compliant samples written
+  std::size_t points = 0;     // samples written (all spec-compliant ones, or one per cell when decimated)
+  std::size_t compliant = 0;  // spec-compliant samples in the views
   std::size_t views = 0;   // views they come from
   std::vector<Eigen::Vector3d> positions, normals;  // the samples written (object frame, mm), when asked for
 };
@@ -29,9 +30,11 @@ struct CloudSummary {
 /// The cloud as a binary little-endian PLY: one vertex per sample that meets the spec (σz ≤ precision, local
 /// density ≥ density, thesis eq. 3.4/3.8) in the object frame, as registered: x y z (mm), nx ny nz (unit
 /// normal from its image neighbours, towards the scanner; 0 0 0 where a neighbour is missing), sigma_z_mm,
-/// view, round. `job` is named in a comment (0: none). Fills `summary` (with the samples when `keep_samples`).
+/// view, round. `job` is named in a comment (0: none). Fills `summary` (with every compliant sample, for the
+/// model, when `keep_samples`). `spacing_mm` > 0 writes one sample per cube of that side (the first in view
+/// order: deterministic), and says so in a comment; 0 keeps all.
 std::string cloud_ply(const std::vector<ProductView>& views, std::int64_t job, const ModelSpec& spec,
-                      CloudSummary& summary, bool keep_samples = false);
+                      CloudSummary& summary, bool keep_samples = false, double spacing_mm = 0.0);
 
 struct ModelSummary {
   std::size_t vertices = 0, triangles = 0, boundary_edges = 0;  // boundary: edges of the holes left open

@@ -6,6 +6,8 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <set>
+#include <tuple>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -239,6 +241,35 @@ TEST_F(Cli, FuseMakesTheModelFromRangeImagesAndRefusesDamagedOrEmptyOnes) {
   const std::string cb((std::istreambuf_iterator<char>(cf)), std::istreambuf_iterator<char>());
   EXPECT_THAT(cb, HasSubstr("property float sigma_z_mm"));
   EXPECT_GT(std::stoul(cb.substr(cb.find("element vertex ") + 15)), 10000u);
+
+  // Decimated (issue 19): one sample per 1 mm cube in the cloud, the model still from every sample (the same
+  // bytes).
+  const fs::path model2 = dir_ / "model2.ply", cloud2 = dir_ / "cloud2.ply";
+  r = run("fuse --scans " + (dir_ / "scans").string() + " --spec " + spec + " --out " + model2.string() + " --cloud " +
+          cloud2.string() + " --cloud-spacing-mm 1");
+  ASSERT_EQ(r.status, 0) << r.output;
+  std::ifstream m2f(model2, std::ios::binary);
+  EXPECT_TRUE(mb == std::string((std::istreambuf_iterator<char>(m2f)), std::istreambuf_iterator<char>()));
+  std::ifstream c2f(cloud2, std::ios::binary);
+  const std::string c2((std::istreambuf_iterator<char>(c2f)), std::istreambuf_iterator<char>());
+  EXPECT_THAT(c2, HasSubstr("comment decimated spacing_mm 1 from "));
+  const std::size_t n2 = std::stoul(c2.substr(c2.find("element vertex ") + 15));
+  // The views' union is 60 x 40 mm of the plane (the fan spans the patch): at most 62 x 42 cubes of 1 mm
+  // counting the edges, twice that as the noise straddles z = 0, against about 2 samples per mm² per view
+  // before; no two in one cube.
+  const std::size_t n1 = std::stoul(cb.substr(cb.find("element vertex ") + 15));
+  EXPECT_GT(n2, 2000u);
+  EXPECT_LE(n2, 2u * 62u * 42u);
+  EXPECT_LT(n2, n1 / 2);
+  std::set<std::tuple<int, int, int>> cells;
+  const std::size_t c2body = c2.find("end_header\n") + 11;
+  for (std::size_t k = 0; k < n2; ++k) {
+    float v[3];
+    std::memcpy(v, c2.data() + c2body + 36 * k, sizeof v);  // x y z nx ny nz sigma_z (floats), view round (ints)
+    EXPECT_TRUE(cells.insert({int(std::floor(v[0])), int(std::floor(v[1])), int(std::floor(v[2]))}).second) << k;
+  }
+  EXPECT_EQ(run("fuse --scans " + (dir_ / "scans").string() + " --spec " + spec + " --out " + model2.string() +
+                " --cloud-spacing-mm -1").status, 2);
 
   // Bad input: named, exit 5 (data error), no model written.
   fs::remove(model);
