@@ -947,7 +947,11 @@ void JobRunner::execute_view(Job& j, std::int64_t plan, const ViewRecord& v, con
                      std::to_string(img.valid_count()) + " samples" + (got.fill_sweeps ? ", " + std::to_string(got.fill_sweeps) + " fill sweep" + (got.fill_sweeps > 1 ? "s" : "") + " took " +
                                                  std::to_string(got.filled_profiles) + " profiles"
                                            : "") +
-                     (lost ? ", " + std::to_string(lost) + " profiles missed" : "") +
+                     (lost ? ", " + std::to_string(lost) + " profiles missed" +
+                                 (settings_.fill_sweeps > 0 ? " after the fill sweeps (a loaded host or a lossy link: lower jobs.scan_speed_mm_s "
+                                                              "or raise jobs.fill_sweeps)"
+                                                            : " (jobs.fill_sweeps 0 keeps them missing)")
+                            : "") +
                      registration + ", measured " + fmt(j.progress.measured) + " (" + fmt(secs, 2) + " s)";
   journal_.event(j.id, j.progress.event);
   report_(j.progress);
