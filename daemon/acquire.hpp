@@ -3,7 +3,8 @@
 // trigger pulse each time the sweep passes the next profile position (software position compare; a drive's
 // position-compare output does this in hardware). Each profile's pose is the kinematics at the position read
 // back. Rows the sweep passed without a profile are swept again (up to JobSettings::fill_sweeps passes, the
-// sweep axis alone back to the first of them, each at half the speed of the one before), firing only at them. Shared by the job runner and the calibration runs.
+// sweep axis alone back to the first of them, each at half the speed of the one before), firing only at
+// them. Shared by the job runner and the calibration runs.
 #include <atomic>
 #include <functional>
 #include <cstdint>

@@ -167,11 +167,8 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
     if (c.jobs.move_timeout.count() <= 0) s.fail(s.key_path("move_timeout_s"), "must be > 0");
     c.jobs.scan_speed_mm_s = s.non_negative("scan_speed_mm_s", 0.0);
     c.jobs.trigger_width = std::chrono::microseconds(static_cast<long>(s.non_negative("trigger_width_us", 0.0)));
-    c.jobs.fill_sweeps = s.get_or<int>("fill_sweeps", c.jobs.fill_sweeps);
-    if (c.jobs.fill_sweeps < 0 || c.jobs.fill_sweeps > 5) s.fail(s.key_path("fill_sweeps"), "must be in [0, 5]");
-    c.jobs.cloud_spacing_mm = s.get_or<double>("cloud_spacing_mm", c.jobs.cloud_spacing_mm);
-    if (!(c.jobs.cloud_spacing_mm >= 0.0 && c.jobs.cloud_spacing_mm <= 10.0))
-      s.fail(s.key_path("cloud_spacing_mm"), "must be in [0, 10] mm (0 keeps every sample)");
+    c.jobs.fill_sweeps = s.ranged("fill_sweeps", c.jobs.fill_sweeps, 0, 5);
+    c.jobs.cloud_spacing_mm = s.ranged("cloud_spacing_mm", c.jobs.cloud_spacing_mm, 0.0, 10.0);
     c.jobs.register_views = s.get_or<bool>("register_views", c.jobs.register_views);
     c.jobs.fused_model_sigma_mm = s.non_negative("fused_model_sigma_mm", c.jobs.fused_model_sigma_mm);
     c.jobs.planner_threads = s.get_or<int>("planner_threads", 0);

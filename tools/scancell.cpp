@@ -125,17 +125,19 @@ std::uint64_t whole(const std::map<std::string, std::string>& o, const std::stri
   return v;
 }
 
-/// Writes to a temporary file and renames, so a reader never sees half a file.
-void write_json(const std::string& out, const nlohmann::json& j) {
+/// Writes bytes to a temporary file and renames, so a reader never sees half a file.
+void write_bytes(const std::string& out, const std::string& bytes) {
   const std::string tmp = out + ".tmp";
   {
-    std::ofstream f(tmp, std::ios::trunc);
+    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
     if (!f) throw std::runtime_error(out + ": cannot open for writing");
-    f << j.dump(2) << '\n';
+    f.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
     if (!f.flush()) throw std::runtime_error(out + ": write failed");
   }
   if (std::rename(tmp.c_str(), out.c_str()) != 0) throw std::runtime_error(out + ": cannot rename " + tmp + ": " + std::strerror(errno));
 }
+
+void write_json(const std::string& out, const nlohmann::json& j) { write_bytes(out, j.dump(2) + "\n"); }
 
 int cmd_plan(int argc, char** argv) {
   const auto o = parse(argc, argv,
@@ -356,18 +358,6 @@ int cmd_scan(int argc, char** argv) {
             << ", too close " << st.too_close << ", back-facing " << st.back_facing << ", beyond grazing "
             << st.beyond_grazing << ", receiver occluded " << st.receiver_occluded << ")\n";
   return 0;
-}
-
-/// Writes bytes to a temporary file and renames, so a reader never sees half a file.
-void write_bytes(const std::string& out, const std::string& bytes) {
-  const std::string tmp = out + ".tmp";
-  {
-    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
-    if (!f) throw std::runtime_error(out + ": cannot open for writing");
-    f.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-    if (!f.flush()) throw std::runtime_error(out + ": write failed");
-  }
-  if (std::rename(tmp.c_str(), out.c_str()) != 0) throw std::runtime_error(out + ": cannot rename " + tmp + ": " + std::strerror(errno));
 }
 
 /// The range-image files `--scans` names: files as given, directories' .ply files in name order.
