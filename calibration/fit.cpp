@@ -4,11 +4,11 @@
 
 #include <Eigen/Dense>
 
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 
 namespace scancell::calibration {
 
-using planner::DataError;
+using scancell::DataError;
 
 PlaneFit fit_plane(const std::vector<Eigen::Vector3d>& pts, const std::string& what) {
   if (pts.size() < 10) throw DataError(what + ": " + std::to_string(pts.size()) + " points, a plane fit needs at least 10");

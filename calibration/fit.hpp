@@ -2,7 +2,7 @@
 // Least-squares fits for the calibration runs: plane (total least squares), sphere (algebraic start, then
 // Gauss-Newton on the geometric distance), circle in 3D (plane of the points, then a sphere-free 2D circle),
 // and a proportional law y = k·x with its standard error. Every fit refuses data it cannot fit with a
-// planner::DataError naming what is missing (too few points, degenerate layout, no convergence).
+// scancell::DataError naming what is missing (too few points, degenerate layout, no convergence).
 #include <cstddef>
 #include <string>
 #include <vector>

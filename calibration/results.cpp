@@ -11,8 +11,8 @@
 #include <unistd.h>
 #include <yaml-cpp/yaml.h>
 
-#include "planner/errors.hpp"
-#include "planner/yaml_section.hpp"
+#include "common/errors.hpp"
+#include "common/yaml_section.hpp"
 
 namespace scancell::calibration {
 
@@ -78,20 +78,20 @@ json to_json(const YAML::Node& n) {
 double number(const CalibrationRecord& r, const std::string& name, const std::string& file) {
   const auto it = r.values.find(name);
   if (it == r.values.end() || !it->is_object() || !it->contains("value") || !(*it)["value"].is_number())
-    throw sp::ConfigError(file + ": values." + name + ": missing or not {value, ci95}");
+    throw scancell::ConfigError(file + ": values." + name + ": missing or not {value, ci95}");
   const double v = (*it)["value"].get<double>();
-  if (!std::isfinite(v)) throw sp::ConfigError(file + ": values." + name + ".value: not finite");
+  if (!std::isfinite(v)) throw scancell::ConfigError(file + ": values." + name + ".value: not finite");
   return v;
 }
 
 Eigen::Vector3d vector3(const CalibrationRecord& r, const std::string& name, const std::string& file) {
   const auto it = r.values.find(name);
   if (it == r.values.end() || !it->contains("value") || !(*it)["value"].is_array() || (*it)["value"].size() != 3)
-    throw sp::ConfigError(file + ": values." + name + ": missing or not {value: [x, y, z], ci95}");
+    throw scancell::ConfigError(file + ": values." + name + ": missing or not {value: [x, y, z], ci95}");
   Eigen::Vector3d v;
   for (int k = 0; k < 3; ++k) {
     const auto& e = (*it)["value"][static_cast<std::size_t>(k)];
-    if (!e.is_number()) throw sp::ConfigError(file + ": values." + name + ".value[" + std::to_string(k) + "]: not a number");
+    if (!e.is_number()) throw scancell::ConfigError(file + ": values." + name + ".value[" + std::to_string(k) + "]: not a number");
     v[k] = e.get<double>();
   }
   return v;
@@ -168,7 +168,7 @@ void write_calibration(const fs::path& file, const CalibrationRecord& r) {
 
 CalibrationRecord load_calibration(const fs::path& file) {
   YAML::Node holder;
-  sp::Section y = sp::open_root(file, holder);
+  scancell::Section y = scancell::open_root(file, holder);
   const int version = y.get<int>("scancell_calibration");
   if (version != 1) y.fail("scancell_calibration", "version " + std::to_string(version) + " is not supported (1 is)");
   CalibrationRecord r;
@@ -192,10 +192,10 @@ CalibrationRecord load_calibration(const fs::path& file) {
 
 std::vector<std::string> apply_calibration(const CalibrationRecord& r, sp::SensorModel& s, sp::CellModel& c) {
   const std::string where = "calibration " + r.kind + " of " + r.date;
-  if (r.cell != c.name) throw sp::ConfigError(where + ": made on cell '" + r.cell + "', this is '" + c.name + "'");
+  if (r.cell != c.name) throw scancell::ConfigError(where + ": made on cell '" + r.cell + "', this is '" + c.name + "'");
   std::vector<std::string> changes;
   auto set = [&](const char* name, double& field, double v, double lo, double hi) {
-    if (!(v > lo && v < hi)) throw sp::ConfigError(where + ": values." + name + " " + std::to_string(v) + " outside (" + std::to_string(lo) + ", " + std::to_string(hi) + ")");
+    if (!(v > lo && v < hi)) throw scancell::ConfigError(where + ": values." + name + " " + std::to_string(v) + " outside (" + std::to_string(lo) + ", " + std::to_string(hi) + ")");
     if (field != v) changes.push_back(std::string(name) + ": " + std::to_string(field) + " -> " + std::to_string(v));
     field = v;
   };
@@ -209,8 +209,8 @@ std::vector<std::string> apply_calibration(const CalibrationRecord& r, sp::Senso
   } else if (r.kind == "turntable_axis") {
     const Eigen::Vector3d p = vector3(r, "table_axis_point_mm", where), d = vector3(r, "table_axis_direction", where);
     if (!(d.norm() > 0.5 && d.normalized().z() > std::cos(0.1)))
-      throw sp::ConfigError(where + ": values.table_axis_direction is not within 0.1 rad of +Z");
-    if (!(p.head<2>().norm() < 50.0)) throw sp::ConfigError(where + ": values.table_axis_point_mm more than 50 mm off the nominal axis");
+      throw scancell::ConfigError(where + ": values.table_axis_direction is not within 0.1 rad of +Z");
+    if (!(p.head<2>().norm() < 50.0)) throw scancell::ConfigError(where + ": values.table_axis_point_mm more than 50 mm off the nominal axis");
     if ((c.table_axis_point_mm - p).norm() > 0.0 || (c.table_axis_direction - d.normalized()).norm() > 0.0) {
       std::ostringstream os;
       os << "turntable axis: point [" << c.table_axis_point_mm.transpose() << "] -> [" << p.transpose() << "] mm, direction ["

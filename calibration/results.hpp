@@ -39,7 +39,7 @@ CalibrationRecord record_of(const PositionerResult& r, const std::string& cell);
 
 /// Written to a temp file, fsynced and renamed: a reader never sees half a file.
 void write_calibration(const std::filesystem::path& file, const CalibrationRecord& record);
-/// Reads and checks one file; planner::ConfigError naming the file and key for anything wrong.
+/// Reads and checks one file; scancell::ConfigError naming the file and key for anything wrong.
 CalibrationRecord load_calibration(const std::filesystem::path& file);
 /// Puts the record's values into the models; returns one line per changed value ("name: old -> new").
 /// A record for another cell is refused (ConfigError).

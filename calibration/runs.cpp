@@ -10,12 +10,12 @@
 #include <Eigen/Geometry>
 
 #include "calibration/fit.hpp"
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 
 namespace scancell::calibration {
 
 namespace sp = scancell::planner;
-using planner::DataError;
+using scancell::DataError;
 
 namespace {
 

@@ -3,7 +3,7 @@
 // run plans its own scans of a known target with the cell's kinematics, has them executed through `ScanFn`
 // (the daemon binds it to the same acquisition code its jobs use: real drives, real trigger, real scanner or
 // their simulators), and fits the model parameters with their uncertainties. Bad data (a scan without samples
-// where the target should be, a fit that does not converge) throws planner::DataError naming the scan; the
+// where the target should be, a fit that does not converge) throws scancell::DataError naming the scan; the
 // caller then keeps the previous calibration.
 #include <functional>
 #include <string>

@@ -6,7 +6,7 @@
 #include <thread>
 
 #include "planner/kinematics/cell.hpp"
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 
 namespace scancell::daemon {
 
@@ -128,7 +128,7 @@ Acquisition acquire_view(dr::Positioner& positioner, ScanHead& head, const sp::C
                          const sp::SensorModel& sensor, const sp::JointVector& q, double L, const JobSettings& settings,
                          const std::atomic<int>& stop, const std::function<void(const std::string&)>& phase) {
   if (q.size() != cell.axes.size())
-    throw sp::DataError(std::to_string(q.size()) + " axis targets for a cell of " + std::to_string(cell.axes.size()) + " axes");
+    throw scancell::DataError(std::to_string(q.size()) + " axis targets for a cell of " + std::to_string(cell.axes.size()) + " axes");
   const std::size_t sweep = cell.axis_index("sweep");
   const double mid = q[sweep], start = mid - 0.5 * L, end = mid + 0.5 * L;
   const int n_rows = sensor.samples_y, n_cols = sensor.samples_x;
@@ -207,10 +207,10 @@ std::vector<std::uint32_t> rows_passed_without_profile(const sp::RangeImage& ima
   const int n = image.rows;
   if (image.acquired_rows.empty() || rows.empty() || n < 2) return {};
   if (image.acquired_rows.size() != static_cast<std::size_t>(n))
-    throw sp::DataError("range image: " + std::to_string(image.acquired_rows.size()) + " acquired-row flags for " +
+    throw scancell::DataError("range image: " + std::to_string(image.acquired_rows.size()) + " acquired-row flags for " +
                         std::to_string(n) + " rows");
   for (const auto r : rows)
-    if (r >= points.size()) throw sp::DataError("row " + std::to_string(r) + " of " + std::to_string(points.size()) + " rough-model points");
+    if (r >= points.size()) throw scancell::DataError("row " + std::to_string(r) + " of " + std::to_string(points.size()) + " rough-model points");
   if (longest_lost_run(image) == 0) return {};
   // Least-squares line y = a + b j through each acquired row's mean view-frame y.
   double s1 = 0, sj = 0, sy = 0, sjj = 0, sjy = 0;
@@ -252,7 +252,7 @@ std::vector<std::uint32_t> rows_passed_without_profile(const sp::RangeImage& ima
 
 Acquisition take_whole(const std::function<Acquisition()>& take, int attempts, int max_gap_rows,
                        const std::function<void(const std::string&)>& log) {
-  if (attempts < 1) throw sp::DataError("take_whole: attempts " + std::to_string(attempts) + " (at least 1)");
+  if (attempts < 1) throw scancell::DataError("take_whole: attempts " + std::to_string(attempts) + " (at least 1)");
   Acquisition best = take();
   int gap = longest_lost_run(best.image);
   for (int a = 2; a <= attempts && gap > max_gap_rows; ++a) {

@@ -7,7 +7,7 @@
 #include "calibration/runs.hpp"
 #include "calibration/targets.hpp"
 #include "daemon/acquire.hpp"
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 
 namespace scancell::daemon {
 

@@ -6,7 +6,7 @@
 
 #include "drivers/canopen_axis.hpp"
 #include "drivers/modbus_axis.hpp"
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 
 namespace scancell::daemon {
 
@@ -18,11 +18,11 @@ std::unique_ptr<CellIo> open_cell_io(const sp::CellModel& cell, const dr::Driver
   for (const auto& [name, cfg] : setup.axes) {
     bool known = false;
     for (const auto& a : cell.axes) known = known || a.name == name;
-    if (!known) throw sp::ConfigError(drivers_file + ": axes." + name + ": cell '" + cell.name + "' has no such axis");
+    if (!known) throw scancell::ConfigError(drivers_file + ": axes." + name + ": cell '" + cell.name + "' has no such axis");
   }
   for (const auto& a : cell.axes) {
     const auto it = setup.axes.find(a.name);
-    if (it == setup.axes.end()) throw sp::ConfigError(drivers_file + ": axes: no driver for cell axis '" + a.name + "'");
+    if (it == setup.axes.end()) throw scancell::ConfigError(drivers_file + ": axes: no driver for cell axis '" + a.name + "'");
     std::unique_ptr<dr::Axis> axis;
     if (const auto* m = std::get_if<dr::ModbusConfig>(&it->second)) {
       dr::ModbusConfig c = *m;

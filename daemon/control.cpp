@@ -17,7 +17,7 @@
 #include <sys/un.h>
 #include <unistd.h>
 
-#include "planner/json_input.hpp"
+#include "common/json_input.hpp"
 
 namespace scancell::daemon {
 namespace {
@@ -86,8 +86,8 @@ json parse_request(const std::string& line) {
   // than a request ever needs (the serializer recurses). No message echoes the request's own text.
   json j;
   try {
-    j = planner::parse_json_input(line, planner::JsonLimits{16, true});
-  } catch (const planner::JsonInputError& e) {
+    j = scancell::parse_json_input(line, scancell::JsonLimits{16, true});
+  } catch (const scancell::JsonInputError& e) {
     throw std::invalid_argument(std::string("request: ") + e.what());
   }
   if (!j.is_object()) throw std::invalid_argument("a request must be a JSON object");

@@ -8,8 +8,8 @@
 
 #include "calibration/results.hpp"
 #include "daemon/calibration_job.hpp"
-#include "planner/errors.hpp"
-#include "planner/text_file.hpp"
+#include "common/errors.hpp"
+#include "common/text_file.hpp"
 
 namespace scancell::daemon {
 
@@ -35,7 +35,7 @@ std::string client_file(const json& req, const char* key, const std::vector<fs::
   const std::string name = std::string("submit: '") + key + "'";
   if (p.empty() || p[0] != '/')
     throw std::invalid_argument(name + " must be an absolute path (the daemon's working directory is not yours), got '" + p + "'");
-  const std::string kind = planner::file_kind(p);
+  const std::string kind = scancell::file_kind(p);
   if (kind == "missing") throw std::invalid_argument(name + ": no such file '" + p + "'");
   if (kind != "regular file") throw std::invalid_argument(name + ": '" + p + "' is a " + kind + ", not a regular file");
   if (allowed.empty()) return p;
@@ -278,15 +278,14 @@ json Daemon::handle(const json& req, const std::function<bool(const json&)>& sen
       throw std::invalid_argument("submit: a bounding-box job on the simulated scanner needs 'truth' (what stands on the table)");
     if (req.contains("rough_vertices")) {
       const auto n = req["rough_vertices"].get<std::int64_t>();
-      if (n < 50 || n > 200000) throw std::invalid_argument("submit: 'rough_vertices' must be in [50, 200000]");
-      r.rough_vertices = static_cast<std::size_t>(n);
+      r.rough_vertices = static_cast<std::size_t>(std::max<std::int64_t>(n, 0));  // validate_request checks the range
     }
     r.placement = req.value("placement", std::string());
     try {
       validate_request(r, &shutting_down_);
-    } catch (const planner::MeshError& e) {
+    } catch (const scancell::MeshError& e) {
       throw std::invalid_argument(std::string("submit: mesh refused: ") + e.what());
-    } catch (const planner::ConfigError& e) {
+    } catch (const scancell::ConfigError& e) {
       throw std::invalid_argument(std::string("submit: config refused: ") + without_content(e.what()));
     }
     const std::string what = r.bbox_mm ? "bbox:" + std::to_string(r.bbox_mm->x()) + "x" + std::to_string(r.bbox_mm->y()) + "x" +
@@ -417,7 +416,7 @@ json Daemon::handle(const json& req, const std::function<bool(const json&)>& sen
     std::vector<std::string> changes;
     try {
       changes = reload_calibration(config_);
-    } catch (const planner::ConfigError& e) {
+    } catch (const scancell::ConfigError& e) {
       throw std::invalid_argument(std::string("reload refused, the previous calibration stays in force: ") + e.what());
     }
     std::lock_guard<std::mutex> tl(telemetry_mu_);

@@ -4,7 +4,7 @@
 #include <sstream>
 
 #include "calibration/results.hpp"
-#include "planner/yaml_section.hpp"
+#include "common/yaml_section.hpp"
 
 namespace scancell::daemon {
 
@@ -25,8 +25,8 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
   DaemonConfig c;
   c.file = fs::absolute(file);
   YAML::Node holder;
-  sp::Section y = sp::open_root(c.file, holder);
-  auto path_key = [&](sp::Section& s, const std::string& key) {
+  scancell::Section y = scancell::open_root(c.file, holder);
+  auto path_key = [&](scancell::Section& s, const std::string& key) {
     const fs::path p = relative_to(c.file, s.get<std::string>(key));
     if (!fs::exists(p)) s.fail(s.key_path(key), "no such file '" + p.string() + "'");
     return p;
@@ -51,7 +51,7 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
   if (c.lcm_url.rfind("udpm://", 0) != 0 && c.lcm_url.rfind("memq://", 0) != 0 && c.lcm_url.rfind("file://", 0) != 0)
     y.fail("lcm_url", "must be a udpm://, memq:// or file:// LCM URL, got '" + c.lcm_url + "'");
   {
-    sp::Section s = y.section("control");
+    scancell::Section s = y.section("control");
     const std::string socket_key = s.get<std::string>("socket");
     c.socket_path = socket.empty() ? relative_to(c.file, socket_key) : fs::absolute(socket);
     c.control.group = s.get_or<std::string>("group", "");
@@ -61,7 +61,7 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
     s.finish();
   }
   {
-    sp::Section s = y.section("scanner");
+    scancell::Section s = y.section("scanner");
     c.scanner_driver = s.get<std::string>("driver");
     if (c.scanner_driver != "sim" && c.scanner_driver != "sim_gige" && c.scanner_driver != "genicam")
       s.fail(s.key_path("driver"), "must be sim, sim_gige or genicam, got '" + c.scanner_driver + "'");
@@ -85,7 +85,7 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
       }
     }
     if (c.scanner_driver == "genicam") {
-      sp::Section t = s.section("trigger");
+      scancell::Section t = s.section("trigger");
       c.trigger_chip = t.get<std::string>("chip");
       c.trigger_offset = static_cast<unsigned>(t.ranged<int>("offset", 0, 0, 1023));
       t.finish();
@@ -94,11 +94,11 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
       s.fail(s.key_path("truth"), "a simulated cell's truth with a real scanner (driver genicam)");
     if (s.has("truth")) {
       // The simulated cell's truth where it differs from the models: what calibration must recover.
-      sp::Section t = s.section("truth");
+      scancell::Section t = s.section("truth");
       SimTruth truth;
       if (t.has("sensor")) truth.sensor = sp::load_sensor(path_key(t, "sensor"));
       if (t.has("table_axis")) {
-        sp::Section a = t.section("table_axis");
+        scancell::Section a = t.section("table_axis");
         truth.table_axis_point_mm = a.vec3("point_mm");
         truth.table_axis_direction = a.vec3("direction");
         if (!(truth.table_axis_direction.norm() > 0.0)) a.fail(a.key_path("direction"), "must not be zero");
@@ -106,7 +106,7 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
         a.finish();
       }
       if (t.has("pose_error")) {
-        sp::Section p = t.section("pose_error");
+        scancell::Section p = t.section("pose_error");
         truth.pose_error.sigma_p_mm = p.non_negative("sigma_p_mm", 0.0);
         truth.pose_error.sigma_a_rad = p.non_negative("sigma_a_rad", 0.0);
         truth.pose_error.sigma_t_rad = p.non_negative("sigma_t_rad", 0.0);
@@ -120,7 +120,7 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
   }
   if (y.has("rough_scan")) {
     // Bounding-box jobs: the exploration program and the fusion of its images (docs/rough-scan.md).
-    sp::Section s = y.section("rough_scan");
+    scancell::Section s = y.section("rough_scan");
     auto& r = c.jobs.rough_scan;
     r.table_steps = s.get_or<int>("table_steps", r.table_steps);
     if (r.table_steps < 3 || r.table_steps > 72) s.fail(s.key_path("table_steps"), "must be in [3, 72]");
@@ -148,7 +148,7 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
     s.finish();
   }
   if (y.has("jobs")) {
-    sp::Section s = y.section("jobs");
+    scancell::Section s = y.section("jobs");
     c.jobs.max_rounds = s.get_or<int>("max_rounds", c.jobs.max_rounds);
     if (c.jobs.max_rounds < 1 || c.jobs.max_rounds > 50) s.fail(s.key_path("max_rounds"), "must be in [1, 50]");
     c.jobs.retire_after_failures = s.get_or<int>("retire_after_failures", c.jobs.retire_after_failures);
@@ -234,9 +234,9 @@ std::vector<std::string> reload_calibration(DaemonConfig& c) {
   if (differ(pb.str(), pa.str()))
     changes.push_back("cell " + c.cell_file.string() + ": pose error sigma_p_mm sigma_a_rad sigma_t_rad " + pb.str() + " -> " + pa.str());
   for (const auto& f : c.calibration_files)
-    if (!fs::exists(f)) throw sp::ConfigError(f.string() + ": calibration file vanished");
+    if (!fs::exists(f)) throw scancell::ConfigError(f.string() + ": calibration file vanished");
   if (cell.axes.size() != c.models.cell.axes.size())
-    throw sp::ConfigError(c.cell_file.string() + ": axes changed; restart the daemon to change the cell's axes");
+    throw scancell::ConfigError(c.cell_file.string() + ": axes changed; restart the daemon to change the cell's axes");
   if ((cell.table_axis_point_mm - c.models.cell.table_axis_point_mm).norm() > 0.0 ||
       (cell.table_axis_direction - c.models.cell.table_axis_direction).norm() > 0.0)
     changes.push_back("cell " + c.cell_file.string() + ": turntable axis changed");

@@ -1,7 +1,7 @@
 #pragma once
 // scancelld's configuration (config/scancelld.yaml): which cell, drivers, sensor, spec and planner settings it
 // runs with (paths relative to the config file), where it keeps its data, its LCM URL, its control socket and
-// the job loop's limits. Anything wrong refuses the start with "file: key.path: why" (planner::ConfigError).
+// the job loop's limits. Anything wrong refuses the start with "file: key.path: why" (scancell::ConfigError).
 #include <chrono>
 #include <filesystem>
 #include <optional>

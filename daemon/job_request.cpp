@@ -54,8 +54,9 @@ void validate_request(const JobRequest& r, const std::atomic<int>* cancel) {
   if (r.bbox_mm && !(r.bbox_mm->minCoeff() > 0.0 && r.bbox_mm->maxCoeff() < 1000.0))
     throw std::invalid_argument("submit: 'bbox_mm' sizes must be in (0, 1000) mm");
   if (!(r.fit_mm >= 0.0) || !std::isfinite(r.fit_mm)) throw std::invalid_argument("submit: 'fit_mm' must be > 0");
-  if (!r.bbox_mm && r.rough_vertices && (*r.rough_vertices < 50 || *r.rough_vertices > 200000))
-    throw std::invalid_argument("submit: 'rough_vertices' must be in [50, 200000]");
+  if (r.rough_vertices && (*r.rough_vertices < sp::kMinRoughVertices || *r.rough_vertices > sp::kMaxRoughVertices))
+    throw std::invalid_argument("submit: 'rough_vertices' must be in [" + std::to_string(sp::kMinRoughVertices) + ", " +
+                                std::to_string(sp::kMaxRoughVertices) + "], got " + std::to_string(*r.rough_vertices));
   if (!r.placement.empty() && r.placement != "auto" && r.placement != "as_given")
     throw std::invalid_argument("submit: 'placement' must be auto or as_given");
   if (r.bbox_mm && r.placement == "auto")

@@ -31,7 +31,7 @@ struct JobRequest {
   static JobRequest from_json(const nlohmann::json& j);
 };
 
-/// Loads and checks everything a request names; throws planner::MeshError/ConfigError naming the file. A
+/// Loads and checks everything a request names; throws scancell::MeshError/ConfigError naming the file. A
 /// non-zero `cancel` stops a mesh read at once (MeshError): the daemon stopping does not wait for it.
 void validate_request(const JobRequest& r, const std::atomic<int>* cancel = nullptr);
 

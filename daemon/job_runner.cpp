@@ -1,4 +1,6 @@
 #include "daemon/job_runner.hpp"
+#include "common/json_matrix.hpp"
+#include "common/timing.hpp"
 
 #include "daemon/acquire.hpp"
 #include "daemon/job_product.hpp"
@@ -11,7 +13,7 @@
 #include <sstream>
 #include <thread>
 
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 #include "planner/geometry/mesh.hpp"
 #include "planner/placement.hpp"
 #include "planner/kinematics/pose_error.hpp"
@@ -27,21 +29,6 @@ namespace sp = scancell::planner;
 namespace dr = scancell::drivers;
 using Clock = std::chrono::steady_clock;
 
-/// A matrix (4×4 pose, 3×3 rotation) as its numbers row by row.
-json matrix_json(const Eigen::Ref<const Eigen::MatrixXd>& m) {
-  json a = json::array();
-  for (Eigen::Index r = 0; r < m.rows(); ++r)
-    for (Eigen::Index c = 0; c < m.cols(); ++c) a.push_back(m(r, c));
-  return a;
-}
-
-Eigen::Isometry3d isometry_from(const json& a, const std::string& what) {
-  if (!a.is_array() || a.size() != 16) throw sp::DataError(what + ": needs 16 numbers");
-  Eigen::Isometry3d t;
-  for (int r = 0; r < 4; ++r)
-    for (int c = 0; c < 4; ++c) t.matrix()(r, c) = a.at(static_cast<std::size_t>(4 * r + c)).get<double>();
-  return t;
-}
 
 std::string fmt(double v, int digits = 4) {
   char b[64];
@@ -126,7 +113,7 @@ template <class Plan>
 sp::ViewPlan plan_or_stop(Plan&& plan, const std::atomic<int>& stop) {
   try {
     return plan();
-  } catch (const sp::PlanCancelled& e) {
+  } catch (const scancell::PlanCancelled& e) {
     throw Interrupted(static_cast<StopRequest>(stop.load()), std::string("during planning (") + e.what() + ")");
   }
 }
@@ -171,7 +158,7 @@ json round_gains(const std::vector<json>& round_infos, double measured_now, doub
 std::vector<std::string> view_records(const sp::ViewPlan& p) {
   std::vector<std::string> out;
   for (std::size_t k = 0; k < p.views.size(); ++k)
-    out.push_back(json({{"camera_to_object", matrix_json(p.views[k].transform())},
+    out.push_back(json({{"camera_to_object", row_major_json(p.views[k].transform())},
                         {"scan_length_mm", p.views[k].scan_length_mm},
                         {"axes", p.view_axes.at(k)},
                         {"move_s", p.view_move_s.at(k)},
@@ -238,7 +225,7 @@ JobRunner::JobRunner(Journal& journal, const CellModels& models, dr::Positioner&
   bool sweep = false;
   for (const auto& a : models_.cell.axes) sweep = sweep || a.name == "sweep";
   if (!sweep)
-    throw sp::ConfigError("cell '" + models_.cell.name + "': no 'sweep' axis; the line-scan execution needs one");
+    throw scancell::ConfigError("cell '" + models_.cell.name + "': no 'sweep' axis; the line-scan execution needs one");
 }
 
 void JobRunner::transition(Job& j, JobState s, const std::string& cause) {
@@ -262,7 +249,7 @@ json JobRunner::next_setup(Job& j) {
     const Eigen::Vector3d down = n.rest.poses[n.pose].down_object;
     out["resting_pose"] = n.pose + 1;
     out["down_object"] = {down.x(), down.y(), down.z()};
-    out["object_to_table_row_major"] = matrix_json(n.object_to_table);
+    out["object_to_table_row_major"] = row_major_json(n.object_to_table);
     out["predicted_gain_mm2"] = n.predicted_gain_mm2;
     out["views"] = n.views;
     // The picture: the rough model turned into that pose (seen from ±X, ±Y, ±Z of the table; -Z is what rests
@@ -274,7 +261,7 @@ json JobRunner::next_setup(Job& j) {
     sp::write_measurability_png(turned, measured, png.string());
     out["picture"] = png.string();
     return out;
-  } catch (const sp::PlanCancelled&) {
+  } catch (const scancell::PlanCancelled&) {
     throw;
   } catch (const std::exception& e) {
     return json{{"error", e.what()}};  // the job's outcome stands; the advice failed and says why
@@ -495,7 +482,7 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
     if (j.request.bbox_mm) j.settings.placement.automatic = false;  // it already stands on the table
     j.rough_options.seed = j.settings.seed;
     if (!j.request.bbox_mm) j.object = load_object(j.request.mesh, j.request.fit_mm);
-    else if (j.request.truth.empty()) throw sp::DataError("a bounding-box job needs 'truth' in simulation: what stands on the table");
+    else if (j.request.truth.empty()) throw scancell::DataError("a bounding-box job needs 'truth' in simulation: what stands on the table");
   } catch (const std::exception& e) {
     j.progress.fault_kind = "job";
     transition(j, JobState::faulted, std::string("job input: ") + e.what());
@@ -527,7 +514,7 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
       const double est = p.cover.cumulative_fraction.empty() ? 0.0 : p.cover.cumulative_fraction.back();
       json info = {{"round", 0},
                          {"rows", p.rough.size()},
-                         {"object_on_table", matrix_json(p.cell->object_on_table.matrix())},
+                         {"object_on_table", row_major_json(p.cell->object_on_table.matrix())},
                          {"estimated", est},
                          {"unmeasurable_rows", j.unmeasurable},
                          {"candidates", p.candidates},
@@ -552,12 +539,12 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
     // The first round's info carries the placement and the rows nothing can measure in this cell.
     const json info0 = json::parse(journal_.plan_info(plans.front()));
     j.cell = models_.cell;
-    j.cell.object_on_table = isometry_from(info0.at("object_on_table"), "plan info object_on_table");
+    j.cell.object_on_table = Eigen::Isometry3d(scancell::matrix4_from_row_major(info0.at("object_on_table"), "plan info object_on_table"));
     j.unmeasurable = info0.at("unmeasurable_rows").get<std::vector<std::uint32_t>>();
     if (info0.contains("placement")) j.placement = info0.at("placement");
     if (!j.rough) j.rough = sp::build_rough_model(j.object, j.rough_options);
     if (j.rough->size() != info0.at("rows").get<std::size_t>())
-      throw sp::DataError("job " + std::to_string(id) + ": the rough model now has " + std::to_string(j.rough->size()) +
+      throw scancell::DataError("job " + std::to_string(id) + ": the rough model now has " + std::to_string(j.rough->size()) +
                           " rows, the journalled plan " + std::to_string(info0.at("rows").get<std::size_t>()) +
                           " (mesh file or planner changed since the job was planned)");
     j.coverage = std::make_unique<sp::MeasuredCoverage>(*j.rough, j.spec, settings_.coverage);
@@ -834,7 +821,7 @@ void JobRunner::rough_scan(Job& j, const std::atomic<int>& stop) {
     sp::TsdfVolume volume(sp::exploration_bounds(*j.request.bbox_mm), fo);
     for (const auto& s : journal_.scans(*plan)) volume.integrate(sp::range_image_from_ply(journal_.read_scan(s), s.file));
     const sp::FusedModel fused = volume.extract();
-    if (fused.mesh.triangles.empty()) throw sp::DataError("rough scan: the fused volume holds no surface (is the object on the table?)");
+    if (fused.mesh.triangles.empty()) throw scancell::DataError("rough scan: the fused volume holds no surface (is the object on the table?)");
     std::size_t guessed = 0;
     for (auto h : fused.hypothetical) guessed += h;
     std::filesystem::create_directories(dir);
@@ -882,7 +869,7 @@ void JobRunner::execute_view(Job& j, std::int64_t plan, const ViewRecord& v, con
   const auto q = pj.at("axes").get<std::vector<double>>();
   const sp::CellModel& cell = j.cell;
   if (q.size() != cell.axes.size())
-    throw sp::DataError("plan " + std::to_string(plan) + " view " + std::to_string(v.index) + ": " + std::to_string(q.size()) +
+    throw scancell::DataError("plan " + std::to_string(plan) + " view " + std::to_string(v.index) + ": " + std::to_string(q.size()) +
                         " axis targets for a cell of " + std::to_string(cell.axes.size()) + " axes");
 
   j.progress.view = v.index + 1;
@@ -939,7 +926,7 @@ void JobRunner::execute_view(Job& j, std::int64_t plan, const ViewRecord& v, con
     }
   }
   j.progress.measured = j.coverage->coverage();
-  const double secs = std::chrono::duration<double>(Clock::now() - t0).count();
+  const double secs = seconds_since(t0);
   j.view_seconds = (j.view_seconds * j.views_timed + secs) / (j.views_timed + 1);
   ++j.views_timed;
   j.progress.eta_s = j.view_seconds * static_cast<double>(j.planned_view_s.size() - static_cast<std::size_t>(v.index) - 1);

@@ -14,7 +14,7 @@
 #include <sys/stat.h>
 
 #include "daemon/daemon.hpp"
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 
 namespace {
 
@@ -84,7 +84,7 @@ int main(int argc, char** argv) {
   scancell::daemon::DaemonConfig cfg;
   try {
     cfg = scancell::daemon::load_daemon_config(config, data_dir, socket);
-  } catch (const scancell::planner::ConfigError& e) {
+  } catch (const scancell::ConfigError& e) {
     std::cerr << "scancelld: configuration refused: " << e.what() << "\n";
     return 4;
   } catch (const std::exception& e) {

@@ -1,11 +1,11 @@
 #include "drivers/config.hpp"
 
-#include "planner/yaml_section.hpp"
+#include "common/yaml_section.hpp"
 
 namespace scancell::drivers {
 namespace {
 
-using planner::Section;
+using scancell::Section;
 
 std::chrono::milliseconds ms(Section& s, const std::string& key, std::chrono::milliseconds fallback) {
   const double v = s.get_or<double>(key, static_cast<double>(fallback.count()));
@@ -41,7 +41,7 @@ LineConfig line(Section s) {
 
 DriverSetup load_driver_setup(const std::filesystem::path& file) {
   YAML::Node root;
-  Section y = planner::open_root(file, root);
+  Section y = scancell::open_root(file, root);
   DriverSetup d;
   Section axes = y.section("axes");
   for (const auto& name : axes.keys()) {

@@ -1,6 +1,6 @@
 #pragma once
 // Which driver each cell axis uses, and the trigger and interlock lines (config/drivers/*.yaml). Counts and
-// scaling live here, units in every key; errors name the file and key path (planner::ConfigError).
+// scaling live here, units in every key; errors name the file and key path (scancell::ConfigError).
 #include <filesystem>
 #include <map>
 #include <optional>

@@ -5,7 +5,7 @@
 #include "fuzz/fuzz.hpp"
 #include "planner/kinematics/cell.hpp"
 #include "planner/config.hpp"
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size < 1) return 0;
@@ -20,7 +20,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       case 4: scancell::drivers::load_driver_setup(path); break;
       case 5: scancell::calibration::load_calibration(path); break;
     }
-  } catch (const sp::ConfigError&) {
+  } catch (const scancell::ConfigError&) {
   }
   return 0;
 }

@@ -4,7 +4,7 @@
 #include <chrono>
 
 #include "fuzz/fuzz.hpp"
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 #include "planner/geometry/mesh.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
@@ -13,7 +13,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   const auto path = scancell::fuzz::as_file(kExt[data[0] % 4], data + 1, size - 1);
   try {
     scancell::planner::load_mesh(path, nullptr, std::chrono::milliseconds(2000));
-  } catch (const scancell::planner::MeshError&) {
+  } catch (const scancell::MeshError&) {
   }
   return 0;
 }

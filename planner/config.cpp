@@ -6,10 +6,10 @@
 
 #include <yaml-cpp/yaml.h>
 
-#include "planner/yaml_section.hpp"
+#include "common/yaml_section.hpp"
 
 #include "planner/kinematics/cell.hpp"
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 
 namespace scancell::planner {
 const char* to_string(SensorKind k) { return k == SensorKind::line_scan ? "line_scan" : "random_access"; }

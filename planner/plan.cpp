@@ -1,8 +1,10 @@
 #include "planner/plan.hpp"
+#include "common/json_matrix.hpp"
+#include "common/timing.hpp"
 #include "planner/kinematics/resting_poses.hpp"
 
 #include "planner/core/cell_viewpoints.hpp"
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -23,7 +25,6 @@ namespace scancell::planner {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 nlohmann::json vec(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
 
@@ -50,9 +51,7 @@ nlohmann::json placement_to_json(const PlacementChoice& c) {
   using nlohmann::json;
   json options = json::array();
   for (const auto& o : c.options) {
-    json rot = json::array();
-    for (int r = 0; r < 3; ++r)
-      for (int k = 0; k < 3; ++k) rot.push_back(o.object_to_table(r, k));
+    const json rot = row_major_json(o.object_to_table);
     options.push_back({{"resting_pose", o.pose < 0 ? json(nullptr) : json(o.pose + 1)},
                        {"as_given", o.as_given},
                        {"object_to_table_row_major", rot},
@@ -116,7 +115,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
   arena.execute([&] {
     auto t = Clock::now();
     p.rough = build_rough_model(std::move(object_mm), rough_options, &p.rough_report);
-    p.times.rough_model_s = since(t);
+    p.times.rough_model_s = seconds_since(t);
     check("the rough model");
     if (measured_rows && measured_rows->size() != p.rough.size())
       throw DataError("replan: " + std::to_string(measured_rows->size()) + " measured-row flags for a rough model of " +
@@ -147,7 +146,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     // In a cell the fixtures (the turntable plate) occlude too: the underside of an object on the plate is
     // not measurable, whatever the rough model says.
     const OcclusionScene scene(p.cell ? with_fixtures(p.rough.mesh(), *p.cell) : p.rough.mesh());
-    p.times.scene_s = since(t);
+    p.times.scene_s = seconds_since(t);
 
     t = Clock::now();
     auto candidates = generate_viewpoints(p.rough, scene, sensor, spec, settings.viewpoints, &p.generation);
@@ -235,7 +234,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     }
     merge_duplicates(candidates);
     p.candidates = candidates.size();
-    p.times.viewpoints_s = since(t);
+    p.times.viewpoints_s = seconds_since(t);
     check("viewpoint generation");
 
     t = Clock::now();
@@ -275,7 +274,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     }
     p.matrix_density = matrix.density();
     p.matrix_bytes = matrix.memory_bytes();
-    p.times.matrix_s = since(t);
+    p.times.matrix_s = seconds_since(t);
 
     check("the measurability matrix");
     t = Clock::now();
@@ -345,7 +344,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
         }
     }
     if (settings.keep_candidates) p.candidate_views = candidates;
-    p.times.cover_s = since(t);
+    p.times.cover_s = seconds_since(t);
   });
   return p;
 }
@@ -407,9 +406,7 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
                    {"matrix", {{"ray_offset_mm", p.settings.matrix.ray_offset_mm}}}};
   Eigen::Matrix4d obj = Eigen::Matrix4d::Identity();
   obj.topLeftCorner<3, 3>() *= p.object.scale;
-  json objt = json::array();
-  for (int r = 0; r < 4; ++r)
-    for (int c = 0; c < 4; ++c) objt.push_back(obj(r, c));
+  const json objt = row_major_json(obj);
   j["object"] = {{"mesh", p.object.mesh_path},
                  {"scale", p.object.scale},
                  {"transform_row_major", objt},
@@ -431,9 +428,7 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
   for (std::size_t k = 0; k < p.views.size(); ++k) {
     const Viewpoint& v = p.views[k];
     const Eigen::Matrix4d t = v.transform();
-    json tm = json::array();
-    for (int r = 0; r < 4; ++r)
-      for (int c = 0; c < 4; ++c) tm.push_back(t(r, c));
+    const json tm = row_major_json(t);
     views.push_back({{"index", k},
                      {"camera_to_object_row_major", tm},
                      {"position_mm", vec(v.position)},
@@ -519,9 +514,7 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
       fixtures.push_back({{"name", f.name}, {"frame", "table"},
                           {"min_mm", {f.box.min.x(), f.box.min.y(), f.box.min.z()}},
                           {"max_mm", {f.box.max.x(), f.box.max.y(), f.box.max.z()}}});
-    json place = json::array();
-    for (int r = 0; r < 4; ++r)
-      for (int k = 0; k < 4; ++k) place.push_back(c.object_on_table.matrix()(r, k));
+    const json place = row_major_json(c.object_on_table.matrix());
     j["cell"] = {{"name", c.name},
                  {"kinematics", c.kinematics == CellKinematics::turntable_lift_tilt ? "turntable_lift_tilt" : "arm_turntable"},
                  {"axes", axes},

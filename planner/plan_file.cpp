@@ -1,6 +1,6 @@
 #include "planner/plan_file.hpp"
 
-#include "planner/json_input.hpp"
+#include "common/json_input.hpp"
 
 #include <cmath>
 #include <fstream>
@@ -9,7 +9,7 @@
 
 #include "planner/kinematics/cell.hpp"
 #include "planner/config.hpp"
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 
 namespace scancell::planner {
 namespace {

@@ -17,7 +17,7 @@
 #include <tbb/task_arena.h>
 
 #include "calibration/results.hpp"
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 #include "planner/plan.hpp"
 #include "planner/placement.hpp"
 #include "planner/plan_file.hpp"
@@ -168,7 +168,13 @@ int cmd_plan(int argc, char** argv) {
   if (settings.placement.automatic && !o.count("--cell"))
     throw UsageError("placement auto chooses how the object rests on a turntable: it needs --cell");
   sp::RoughModelOptions rough;
-  if (o.count("--rough-vertices")) rough.target_vertices = whole(o, "--rough-vertices");
+  if (o.count("--rough-vertices")) {
+    const std::uint64_t n = whole(o, "--rough-vertices");
+    if (n < sp::kMinRoughVertices || n > sp::kMaxRoughVertices)
+      throw UsageError("--rough-vertices: must be in [" + std::to_string(sp::kMinRoughVertices) + ", " +
+                       std::to_string(sp::kMaxRoughVertices) + "], got " + std::to_string(n));
+    rough.target_vertices = n;
+  }
   if (o.count("--rho-rel")) rough.rho_rel = number(o, "--rho-rel");
   if (o.count("--rough-noise-mm")) rough.normal_noise_mm = number(o, "--rough-noise-mm");
   if (o.count("--seed")) settings.seed = whole(o, "--seed");
@@ -390,7 +396,7 @@ int cmd_fuse(int argc, char** argv) {
   for (const auto& f : scan_files(o.at("--scans"))) {
     sp::ProductView v;
     v.image = sp::load_range_image(f);  // a damaged file: DataError naming it
-    if (v.image.valid_count() == 0) throw sp::DataError(f.string() + ": no samples (an empty range image; leave it out)");
+    if (v.image.valid_count() == 0) throw scancell::DataError(f.string() + ": no samples (an empty range image; leave it out)");
     v.view = static_cast<int>(views.size());
     views.push_back(std::move(v));
   }
@@ -455,13 +461,13 @@ int main(int argc, char** argv) {
   } catch (const UsageError& e) {
     std::cerr << "scancell " << cmd << ": " << e.what() << "\n" << usage;
     return 2;
-  } catch (const sp::MeshError& e) {
+  } catch (const scancell::MeshError& e) {
     std::cerr << "scancell: mesh error: " << e.what() << "\n";
     return 3;
-  } catch (const sp::ConfigError& e) {
+  } catch (const scancell::ConfigError& e) {
     std::cerr << "scancell: config error: " << e.what() << "\n";
     return 4;
-  } catch (const sp::DataError& e) {
+  } catch (const scancell::DataError& e) {
     std::cerr << "scancell: data error: " << e.what() << "\n";
     return 5;
   } catch (const std::exception& e) {

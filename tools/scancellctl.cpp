@@ -18,6 +18,8 @@
 #include <string>
 #include <vector>
 
+#include "common/timing.hpp"
+
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 #include <sys/socket.h>
@@ -159,7 +161,7 @@ int watch(Connection& c, std::int64_t job, bool as_json) {
         std::cerr << "scancellctl: " << m.value("error", "refused") << "\n";
         return 1;
       }
-      const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      const double secs = scancell::seconds_since(t0);
       if (as_json) std::cout << m.dump() << std::endl;
       else print_result(m, secs);
       return outcome_code(m.value("state", ""));

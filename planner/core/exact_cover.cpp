@@ -1,4 +1,5 @@
 #include "planner/core/exact_cover.hpp"
+#include "common/timing.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -23,14 +24,13 @@
 #include <coin/CoinPackedMatrix.hpp>
 #include <coin/OsiClpSolverInterface.hpp>
 
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 
 namespace scancell::planner {
 namespace {
 
 using Clock = std::chrono::steady_clock;
 
-double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
 /// The instance after presolve, everything the worker needs (it inherits this memory across fork).
 struct Problem {

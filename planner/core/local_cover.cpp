@@ -1,4 +1,5 @@
 #include "planner/core/local_cover.hpp"
+#include "common/timing.hpp"
 #include "planner/core/union_find.hpp"
 
 #include <algorithm>
@@ -314,7 +315,7 @@ std::vector<std::uint32_t> local_search_cover(const MeasurabilityMatrix& m, cons
     };
     while (rep.iterations < iterations) {
       if ((rep.iterations & 255) == 0 &&
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() > time_limit_s) {
+          seconds_since(t0) > time_limit_s) {
         rep.time_limit_hit = true;
         break;
       }
@@ -339,7 +340,7 @@ std::vector<std::uint32_t> local_search_cover(const MeasurabilityMatrix& m, cons
     if (s.uncovered() == 0 && s.chosen().size() < best.size()) record();
   }
   rep.best_views = best.size();
-  rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  rep.seconds = seconds_since(t0);
   if (report) *report = rep;
   return best;
 }

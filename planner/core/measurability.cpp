@@ -1,6 +1,6 @@
 #include "planner/core/measurability.hpp"
 
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 
 #include <algorithm>
 #include <atomic>

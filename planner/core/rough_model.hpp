@@ -26,6 +26,10 @@ struct RoughModel {
   TriangleMesh mesh() const { return {points, triangles}; }
 };
 
+/// The rough-model sizes a plan or job accepts (rows of the measurability matrix): fewer cannot carry a
+/// surface, more outgrow the matrix's memory and plan time.
+inline constexpr std::size_t kMinRoughVertices = 50, kMaxRoughVertices = 200000;
+
 struct RoughModelOptions {
   std::optional<std::size_t> target_vertices;  // --rough-vertices
   std::optional<double> rho_rel;                // --rho-rel: log2(rough density / input density), thesis 5.3

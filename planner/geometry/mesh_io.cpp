@@ -24,7 +24,7 @@
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
 
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 
 namespace scancell::planner {
 namespace {

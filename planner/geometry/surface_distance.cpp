@@ -6,7 +6,7 @@
 
 #include <Eigen/Geometry>
 
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 #include "planner/core/rough_model.hpp"
 
 namespace scancell::planner {

@@ -16,7 +16,7 @@
 #include <kdl/chainjnttojacsolver.hpp>
 #include <kdl/frames.hpp>
 
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 
 namespace scancell::planner {
 namespace {

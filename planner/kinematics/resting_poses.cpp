@@ -12,7 +12,7 @@ extern "C" {
 #include <libqhull_r/qhull_ra.h>
 }
 
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 
 namespace scancell::planner {
 

@@ -6,7 +6,7 @@
 #include <stdexcept>
 #include <unordered_map>
 
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 
 namespace scancell::planner {
 

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 #include "planner/geometry/surface_distance.hpp"
 
 namespace scancell::planner {

@@ -4,7 +4,7 @@
 #include <cmath>
 
 #include "planner/config.hpp"
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 
 namespace scancell::planner {
 namespace {

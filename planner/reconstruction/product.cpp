@@ -5,7 +5,7 @@
 #include <unordered_set>
 
 #include "common/binary.hpp"
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 #include "planner/reconstruction/measured_coverage.hpp"
 #include "planner/reconstruction/registration.hpp"
 

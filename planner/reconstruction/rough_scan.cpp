@@ -8,7 +8,7 @@
 #include <sstream>
 #include <unordered_map>
 
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 
 namespace scancell::planner {
 

@@ -11,7 +11,7 @@
 #include <sstream>
 
 #include "common/binary.hpp"
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 
 namespace scancell::planner {
 

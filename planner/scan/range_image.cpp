@@ -10,7 +10,7 @@
 #include <string>
 
 #include "common/binary.hpp"
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 
 namespace scancell::planner {
 

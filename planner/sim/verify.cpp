@@ -1,4 +1,5 @@
 #include "planner/sim/verify.hpp"
+#include "common/timing.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -13,7 +14,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 #include "planner/core/measurability.hpp"
 #include "planner/core/rough_model.hpp"
 
@@ -185,7 +186,7 @@ Verification verify_views(const TriangleMesh& fine, const SensorModel& sensor, c
     }
     out.mv_analytic = out.views.back().cumulative_analytic;
   }
-  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  out.seconds = seconds_since(t0);
   return out;
 }
 
@@ -225,7 +226,7 @@ Verification verify_images(const TriangleMesh& fine, const ModelSpec& spec, cons
   }
   out.mv = out.views.empty() ? 0.0 : out.views.back().cumulative;
   out.estimated = std::nan("");
-  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  out.seconds = seconds_since(t0);
   return out;
 }
 
@@ -246,7 +247,7 @@ MonteCarloResult verify_monte_carlo(const TriangleMesh& fine, const SensorModel&
   r.sd = trials > 1 ? std::sqrt(std::max(0.0, (s2 - trials * r.mean * r.mean) / (trials - 1))) : 0.0;
   r.min = *std::min_element(r.mv.begin(), r.mv.end());
   r.max = *std::max_element(r.mv.begin(), r.mv.end());
-  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  r.seconds = seconds_since(t0);
   return r;
 }
 

@@ -17,7 +17,7 @@
 #include "daemon/calibration_job.hpp"
 #include "daemon/cell_io.hpp"
 #include "planner/config.hpp"
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 
 namespace scancell::calibration {
 namespace {
@@ -71,11 +71,11 @@ TEST(Fit, SphereCircleAndPlaneRecoverKnownGeometry) {
   try {
     fit_sphere({c, c, c}, "sphere scan 3");
     FAIL() << "no error";
-  } catch (const sp::DataError& e) {
+  } catch (const scancell::DataError& e) {
     EXPECT_THAT(e.what(), HasSubstr("sphere scan 3"));
   }
-  EXPECT_THROW(fit_plane(std::vector<Eigen::Vector3d>(20, c), "line"), sp::DataError);
-  EXPECT_THROW(fit_circle({c, c, c}, "ring"), sp::DataError);
+  EXPECT_THROW(fit_plane(std::vector<Eigen::Vector3d>(20, c), "line"), scancell::DataError);
+  EXPECT_THROW(fit_circle({c, c, c}, "ring"), scancell::DataError);
 }
 
 TEST(Targets, ClosedWithOutwardNormalsAndTheRampFaceWhereItSays) {
@@ -216,7 +216,7 @@ TEST(CalibrationFile, DamageIsRefusedNamingTheKey) {
     try {
       load_calibration(d / "c.yaml");
       ADD_FAILURE() << "accepted: " << text;
-    } catch (const sp::ConfigError& e) {
+    } catch (const scancell::ConfigError& e) {
       EXPECT_THAT(e.what(), HasSubstr(expect)) << text;
     }
   };
@@ -232,7 +232,7 @@ TEST(CalibrationFile, DamageIsRefusedNamingTheKey) {
   sp::SensorModel s;
   sp::CellModel c;
   c.name = "turntable-lift-tilt";
-  EXPECT_THROW(apply_calibration(r, s, c), sp::ConfigError);
+  EXPECT_THROW(apply_calibration(r, s, c), scancell::ConfigError);
   fs::remove_all(d);
 }
 

@@ -17,7 +17,7 @@
 #include "daemon/cell_io.hpp"
 #include "daemon/job_runner.hpp"
 #include "planner/config.hpp"
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 #include "planner/geometry/mesh.hpp"
 #include "planner/core/rough_model.hpp"
 #include "planner/reconstruction/rough_scan.hpp"
@@ -159,7 +159,7 @@ TEST(TakeWhole, RetakesASweepWithARunOfLostProfilesAndKeepsTheBestTake) {
   lost = {{7, 8, 9}};
   EXPECT_EQ(take_whole(take, 3, 4).lost_profiles, 3);  // a gap within the limit is taken once
   EXPECT_EQ(calls, 1u);
-  EXPECT_THROW(take_whole(take, 0, 4), sp::DataError);
+  EXPECT_THROW(take_whole(take, 0, 4), scancell::DataError);
 }
 
 // Issue 15: a row the sweep passed without a profile did not fail for its geometry. A 10-row sweep, profile
@@ -190,7 +190,7 @@ TEST(LostProfiles, RowsInOrBesideALostProfileArePassedTheRestAreNot) {
   img.acquired_rows[0] = 1;
   for (std::size_t k = 3; k < img.samples.size(); ++k) img.samples[k].measured = false;
   EXPECT_EQ(rows_passed_without_profile(img, points, all), all);
-  EXPECT_THROW(rows_passed_without_profile(img, points, {7}), sp::DataError);
+  EXPECT_THROW(rows_passed_without_profile(img, points, {7}), scancell::DataError);
 }
 
 /// A head whose scanner loses the first profile fired at each of chosen rows (a frame lost on the wire), the
@@ -719,13 +719,13 @@ TEST_F(SimCell, FromABoundingBoxRoughScanThenPlanAndMeasure) {
 TEST(JobRequest, BadInputIsRefusedNamingTheFile) {
   JobRequest r;
   r.mesh = src("../shared/bad-inputs/does-not-exist.stl");
-  EXPECT_THROW(validate_request(r), sp::MeshError);
+  EXPECT_THROW(validate_request(r), scancell::MeshError);
   r.mesh = src("tests/data/mushroom.off");
   r.fit_mm = -3;
   EXPECT_THROW(validate_request(r), std::invalid_argument);
   r.fit_mm = 200;
   r.spec = src("config/sensors/line-scan-thesis.yaml");  // not a spec
-  EXPECT_THROW(validate_request(r), sp::ConfigError);
+  EXPECT_THROW(validate_request(r), scancell::ConfigError);
   // Issue 16, lesser findings: fit_mm was unchecked for bounding-box jobs, and mesh with bbox_mm was refused
   // for something else.
   auto refusal = [](const JobRequest& q) {

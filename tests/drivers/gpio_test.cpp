@@ -178,33 +178,3 @@ TEST(SimScanner, OneProfilePerTriggerPulseAtTheAxesPose) {
   }
   EXPECT_THROW(scanner.acquire(20ms), dr::DriverError);
 }
-
-TEST(DriverConfig, ShippedSetupLoadsAndMistakesNameTheKey) {
-  const auto d = dr::load_driver_setup(std::string(SCANCELL_SOURCE_DIR) + "/config/drivers/turntable-lift-tilt.yaml");
-  ASSERT_EQ(d.axes.size(), 5u);
-  const auto& reach = std::get<dr::ModbusConfig>(d.axes.at("reach"));
-  EXPECT_EQ(reach.unit_id, 1);
-  EXPECT_DOUBLE_EQ(reach.counts_per_unit, 1000.0);
-  EXPECT_EQ(std::get<dr::ModbusConfig>(d.axes.at("sweep")).parity, 'E');
-  EXPECT_EQ(std::get<dr::CanOpenAxisConfig>(d.axes.at("turntable")).axis.node_id, 5);
-  ASSERT_TRUE(d.estop.has_value());
-  EXPECT_FALSE(d.estop->active_high);
-  const auto dir = std::filesystem::temp_directory_path() / "scancell_driver_config";
-  std::filesystem::create_directories(dir);
-  auto refused = [&](const std::string& text, const std::string& expect) {
-    std::ofstream(dir / "d.yaml") << text;
-    try {
-      dr::load_driver_setup(dir / "d.yaml");
-      ADD_FAILURE() << "accepted: " << expect;
-    } catch (const std::exception& e) {
-      EXPECT_THAT(e.what(), HasSubstr(expect));
-    }
-  };
-  refused("axes:\n  lift: {driver: modbus_tcp, host: h, port: 70000, unit_id: 1, counts_per_mm: 1, profile_velocity_mm_s: 1}\n",
-          "axes.lift.port: must be in [1, 65535]");
-  refused("axes:\n  lift: {driver: modbus_tcp, host: h, port: 502, unit_id: 1, counts_per_mm: 1, counts_per_rad: 1, profile_velocity_mm_s: 1}\n",
-          "give counts_per_mm (linear) or counts_per_rad (rotary)");
-  refused("axes:\n  lift: {driver: profibus}\n", "axes.lift.driver: must be modbus_tcp, modbus_rtu, canopen or sim");
-  refused("axes:\n  lift: {driver: sim, speed: 3}\n", "axes.lift.speed: unknown key");
-  std::filesystem::remove_all(dir);
-}

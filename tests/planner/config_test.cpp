@@ -6,7 +6,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 #include "test_meshes.hpp"
 
 namespace scancell::planner {

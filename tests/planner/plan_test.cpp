@@ -12,7 +12,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 #include "planner/plan.hpp"
 #include "planner/geometry/scene.hpp"
 #include "planner/sim/virtual_scanner.hpp"

@@ -5,7 +5,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 #include "planner/core/measurability.hpp"
 #include "planner/plan.hpp"
 #include "test_meshes.hpp"

@@ -151,7 +151,9 @@ TEST(LocalSearch, SameSeedSameCoverAndNeverLargerThanItsStart) {
   for (std::uint32_t r = 0; r < rows; ++r)
     if (got[r]) wanted.push_back(r);
   EXPECT_TRUE(covers(m, a, wanted));
-  if (registration_component_count(m, w, st, g.views) == 1) EXPECT_EQ(registration_component_count(m, w, st, a), 1u);
+  if (registration_component_count(m, w, st, g.views) == 1) {
+    EXPECT_EQ(registration_component_count(m, w, st, a), 1u);
+  }
 }
 
 }  // namespace

@@ -7,7 +7,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 #include "planner/geometry/mesh.hpp"
 #include "planner/core/rough_model.hpp"
 #include "test_meshes.hpp"

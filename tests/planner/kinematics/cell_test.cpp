@@ -8,7 +8,7 @@
 #include <gtest/gtest.h>
 
 #include "planner/kinematics/cell.hpp"
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 #include "planner/plan.hpp"
 #include "planner/kinematics/pose_error.hpp"
 #include "planner/sim/synthetic.hpp"
@@ -178,7 +178,7 @@ TEST(Cell, BadCellConfigsNameTheKey) {
     try {
       sp::load_cell(dir / "c.yaml");
       ADD_FAILURE() << "accepted: " << expect;
-    } catch (const sp::ConfigError& e) {
+    } catch (const scancell::ConfigError& e) {
       EXPECT_THAT(e.what(), HasSubstr(expect));
     }
   };

@@ -6,7 +6,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 #include "planner/kinematics/resting_poses.hpp"
 #include "planner/placement.hpp"
 #include "planner/sim/synthetic.hpp"
@@ -138,7 +138,7 @@ TEST(RestingPoses, AFlatMeshHasNoHullAndSaysSo) {
   try {
     sp::resting_poses(sp::testing::flat_patch(50, 10));
     FAIL() << "a flat patch has no resting pose";
-  } catch (const sp::DataError& e) {
+  } catch (const scancell::DataError& e) {
     EXPECT_THAT(e.what(), HasSubstr("no convex hull"));
     EXPECT_THAT(e.what(), HasSubstr("50 x 50 x 0 mm"));
   }
@@ -204,13 +204,13 @@ TEST(Placement, TheNextSetupTurnsTheUnmeasuredBaseToWhereTheCellSeesIt) {
 TEST(Placement, SettingsOutOfRangeNameTheKey) {
   sp::PlacementSettings s;
   s.candidates = 0;
-  EXPECT_THROW(sp::validate(s), sp::ConfigError);
+  EXPECT_THROW(sp::validate(s), scancell::ConfigError);
   s = {};
   s.min_tip_angle_rad = 2.0;
   try {
     sp::validate(s);
     FAIL();
-  } catch (const sp::ConfigError& e) {
+  } catch (const scancell::ConfigError& e) {
     EXPECT_THAT(e.what(), HasSubstr("placement.min_tip_angle_rad"));
   }
 }

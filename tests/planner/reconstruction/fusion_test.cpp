@@ -12,7 +12,7 @@
 
 #include "planner/sim/virtual_scanner.hpp"
 #include "planner/config.hpp"
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 #include "planner/reconstruction/fusion.hpp"
 #include "planner/core/rough_model.hpp"
 #include "planner/reconstruction/rough_scan.hpp"

@@ -3,7 +3,7 @@
 
 #include <gtest/gtest.h>
 
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 #include "planner/reconstruction/inspection.hpp"
 #include "test_meshes.hpp"
 

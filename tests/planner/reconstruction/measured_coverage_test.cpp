@@ -3,7 +3,7 @@
 
 #include "planner/sim/virtual_scanner.hpp"
 #include "planner/config.hpp"
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 #include "planner/reconstruction/measured_coverage.hpp"
 #include "planner/plan.hpp"
 #include "planner/sim/synthetic.hpp"

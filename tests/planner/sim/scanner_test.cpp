@@ -8,7 +8,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 #include "planner/sim/verify.hpp"
 #include "planner/sim/virtual_scanner.hpp"
 #include "test_meshes.hpp"
@@ -201,7 +201,7 @@ TEST(VirtualScanner, RangeImageFileRoundTripsAndRefusesDamage) {
   try {
     sp::range_image_from_ply(mixed, "mixed.ply");
     ADD_FAILURE() << "mixed truth accepted";
-  } catch (const sp::DataError& e) {
+  } catch (const scancell::DataError& e) {
     EXPECT_THAT(e.what(), ::testing::HasSubstr("mixed.ply: " + std::to_string(img.valid_count() - 1) + " of " +
                                                    std::to_string(img.valid_count()) + " samples carry a triangle id"));
   }
@@ -211,14 +211,14 @@ TEST(VirtualScanner, RangeImageFileRoundTripsAndRefusesDamage) {
   try {
     sp::load_range_image(file);
     FAIL() << "truncated file accepted";
-  } catch (const sp::DataError& e) {
+  } catch (const scancell::DataError& e) {
     EXPECT_NE(std::string(e.what()).find("truncated"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("image.ply"), std::string::npos) << e.what();
   }
   // A PLY that is not ours.
   std::ofstream(dir / "other.ply") << "ply\nformat ascii 1.0\nelement vertex 0\nend_header\n";
-  EXPECT_THROW(sp::load_range_image(dir / "other.ply"), sp::DataError);
-  EXPECT_THROW(sp::load_range_image(dir / "missing.ply"), sp::DataError);
+  EXPECT_THROW(sp::load_range_image(dir / "other.ply"), scancell::DataError);
+  EXPECT_THROW(sp::load_range_image(dir / "missing.ply"), scancell::DataError);
   std::filesystem::remove_all(dir);
 }
 
@@ -229,7 +229,7 @@ TEST(VirtualScanner, RangeImageWhoseSampleCountWrapsIsRefused) {
   try {
     sp::load_range_image(file);
     FAIL() << "a range image of 2^62 samples with no body was accepted";
-  } catch (const sp::DataError& e) {
+  } catch (const scancell::DataError& e) {
     const std::string what = e.what();
     EXPECT_NE(what.find("range-image-count-overflow.ply"), std::string::npos) << what;
     EXPECT_NE(what.find("4611686018427387904 exceeds the image's 4 x 4 pixels"), std::string::npos) << what;

@@ -9,7 +9,7 @@
 #include <gtest/gtest.h>
 
 #include "planner/sim/baselines.hpp"
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 #include "planner/plan.hpp"
 #include "planner/plan_file.hpp"
 #include "planner/sim/synthetic.hpp"
@@ -199,7 +199,7 @@ TEST(PlanFile, RoundTripsThePlanAndNamesDamage) {
   bad["format"] = "something";
   refused(bad, "format");
   std::ofstream(dir / "bad.json") << "{\"format\": \"scancell-plan\", ";
-  EXPECT_THROW(sp::load_plan_file(dir / "bad.json"), sp::DataError);
+  EXPECT_THROW(sp::load_plan_file(dir / "bad.json"), scancell::DataError);
   // Issue 16, defect 3: a sensor nested 200,000 levels deep crashed the recursive serializer (stack overflow);
   // it is refused while parsing, naming the file, and so is a key given twice.
   {
@@ -212,14 +212,14 @@ TEST(PlanFile, RoundTripsThePlanAndNamesDamage) {
   try {
     sp::load_plan_file(dir / "bad.json");
     ADD_FAILURE() << "a 200,000-deep plan was accepted";
-  } catch (const sp::DataError& e) {
+  } catch (const scancell::DataError& e) {
     EXPECT_THAT(e.what(), testing::HasSubstr("bad.json: nested deeper than 32 levels"));
   }
   std::ofstream(dir / "bad.json") << "{\"format\": \"scancell-plan\", \"format\": \"other\"}";
   try {
     sp::load_plan_file(dir / "bad.json");
     ADD_FAILURE() << "a duplicate key was accepted";
-  } catch (const sp::DataError& e) {
+  } catch (const scancell::DataError& e) {
     EXPECT_THAT(e.what(), testing::HasSubstr("key 'format' given twice"));
   }
   std::filesystem::remove_all(dir);

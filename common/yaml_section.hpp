@@ -13,10 +13,10 @@
 #include <yaml-cpp/depthguard.h>
 #include <yaml-cpp/yaml.h>
 
-#include "planner/errors.hpp"
-#include "planner/text_file.hpp"
+#include "common/errors.hpp"
+#include "common/text_file.hpp"
 
-namespace scancell::planner {
+namespace scancell {
 
 /// A YAML mapping that knows its key path and which keys were read, so unknown keys can be refused.
 class Section {
@@ -159,4 +159,4 @@ inline Section parse_root(const std::string& text, const std::string& where, YAM
 }
 
 
-}  // namespace scancell::planner
+}  // namespace scancell

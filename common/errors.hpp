@@ -4,7 +4,7 @@
 #include <stdexcept>
 #include <string>
 
-namespace scancell::planner {
+namespace scancell {
 
 /// A mesh file that cannot be used: unreadable, malformed, or without usable triangles.
 struct MeshError : std::runtime_error {
@@ -28,4 +28,4 @@ struct PlanCancelled : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-}  // namespace scancell::planner
+}  // namespace scancell

@@ -6,7 +6,7 @@
 #include <filesystem>
 #include <string>
 
-namespace scancell::planner {
+namespace scancell {
 
 /// What kind of file system object `path` is ("regular file", "FIFO", "directory", ...), following links;
 /// "missing" when it does not exist.
@@ -16,4 +16,4 @@ std::string file_kind(const std::filesystem::path& path);
 /// (no window between the check and the read). Throws ConfigError naming the file and why.
 std::string read_regular_file(const std::filesystem::path& path, std::size_t max_bytes);
 
-}  // namespace scancell::planner
+}  // namespace scancell

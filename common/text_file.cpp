@@ -1,4 +1,4 @@
-#include "planner/text_file.hpp"
+#include "common/text_file.hpp"
 
 #include <cerrno>
 #include <cstring>
@@ -7,9 +7,9 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "planner/errors.hpp"
+#include "common/errors.hpp"
 
-namespace scancell::planner {
+namespace scancell {
 namespace {
 
 const char* kind_of(mode_t m) {
@@ -57,4 +57,4 @@ std::string read_regular_file(const std::filesystem::path& path, std::size_t max
   return text;
 }
 
-}  // namespace scancell::planner
+}  // namespace scancell

@@ -1,9 +1,9 @@
-#include "planner/json_input.hpp"
+#include "common/json_input.hpp"
 
 #include <set>
 #include <vector>
 
-namespace scancell::planner {
+namespace scancell {
 namespace {
 
 using json = nlohmann::json;
@@ -37,4 +37,4 @@ json parse_bounded(Input&& in, const JsonLimits& limits) {
 json parse_json_input(const std::string& text, const JsonLimits& limits) { return parse_bounded(text, limits); }
 json parse_json_input(std::istream& in, const JsonLimits& limits) { return parse_bounded(in, limits); }
 
-}  // namespace scancell::planner
+}  // namespace scancell

@@ -8,7 +8,7 @@
 
 #include <nlohmann/json.hpp>
 
-namespace scancell::planner {
+namespace scancell {
 
 /// What was wrong with the text, never quoting it (a client's file or request is not echoed back).
 struct JsonInputError : std::runtime_error {
@@ -25,4 +25,4 @@ struct JsonLimits {
 nlohmann::json parse_json_input(const std::string& text, const JsonLimits& limits = {});
 nlohmann::json parse_json_input(std::istream& in, const JsonLimits& limits = {});
 
-}  // namespace scancell::planner
+}  // namespace scancell
