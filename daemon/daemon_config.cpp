@@ -70,14 +70,18 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
       // The GenICam driver's settings, each declared once with its range (drivers/genicam/genicam_scanner.hpp).
       auto& g = c.genicam;
       g.device = s.get_or<std::string>("device", c.scanner_driver == "sim_gige" ? "127.0.0.1" : "");
-      g.profiles_per_frame = s.ranged<int>("profiles_per_frame", g.profiles_per_frame, 1, 2048);
+      using G = drivers::GenicamConfig;
+      auto ranged = [&](const char* key, auto fallback, auto lim) {
+        return s.ranged<decltype(fallback)>(key, fallback, lim.lo, lim.hi);
+      };
+      g.profiles_per_frame = ranged("profiles_per_frame", g.profiles_per_frame, G::profiles_per_frame_limits);
       g.trigger_line = s.get_or<std::string>("trigger_line", g.trigger_line);
-      g.packet_size_bytes = s.ranged<int>("packet_size_bytes", g.packet_size_bytes, 0, 9000);
+      g.packet_size_bytes = s.ranged<int>("packet_size_bytes", g.packet_size_bytes, 0, G::packet_size_bytes_limits.hi);  // 0: the device's
       g.mark_columns = s.ranged<int>("mark_columns", g.mark_columns, 0, 2);
-      g.mono16_scale_mm = s.ranged<double>("mono16_scale_mm", g.mono16_scale_mm, 0.0, 1.0);
-      g.mono16_offset_mm = s.ranged<double>("mono16_offset_mm", g.mono16_offset_mm, -10000.0, 10000.0);
-      g.exposure_us = s.ranged<double>("exposure_us", g.exposure_us, 0.0, 1e6);
-      g.stream_buffers = s.ranged<int>("stream_buffers", g.stream_buffers, 2, 1024);
+      g.mono16_scale_mm = ranged("mono16_scale_mm", g.mono16_scale_mm, G::mono16_scale_mm_limits);
+      g.mono16_offset_mm = ranged("mono16_offset_mm", g.mono16_offset_mm, G::mono16_offset_mm_limits);
+      g.exposure_us = ranged("exposure_us", g.exposure_us, G::exposure_us_limits);
+      g.stream_buffers = ranged("stream_buffers", g.stream_buffers, G::stream_buffers_limits);
       try {
         drivers::check_genicam_config(g, "scanner");
       } catch (const drivers::DriverError& e) {

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <vector>
 
@@ -17,6 +18,13 @@ constexpr std::uint32_t kPaddingMark = 0xFFFFFFFFu;
 
 DriverError refused(const std::string& where, const std::string& why) {
   return DriverError(DriverError::Kind::refused, kDev, where, why);
+}
+
+/// A number as the config would write it: 2048, 0.5, 1e+06.
+std::string fmt_number(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%g", v);
+  return b;
 }
 
 /// A GError from Aravis as a DriverError naming the feature, freed here.
@@ -47,20 +55,27 @@ std::string serial_to_device_id(const std::string& serial) {
 
 void check_genicam_config(const GenicamConfig& c, const std::string& key) {
   if (c.device.empty()) throw refused(key + ".device", "empty: give the scanner's IP address, serial number or user id");
-  if (c.profiles_per_frame < 1 || c.profiles_per_frame > 2048)
-    throw refused(key + ".profiles_per_frame", std::to_string(c.profiles_per_frame) + " outside [1, 2048]");
+  using G = GenicamConfig;
+  auto outside = [](auto v, auto lim) { return !(v >= lim.lo && v <= lim.hi); };
+  auto range = [](auto lim) { return "[" + fmt_number(lim.lo) + ", " + fmt_number(lim.hi) + "]"; };
+  if (outside(c.profiles_per_frame, G::profiles_per_frame_limits))
+    throw refused(key + ".profiles_per_frame", std::to_string(c.profiles_per_frame) + " outside " + range(G::profiles_per_frame_limits));
   if (c.trigger_line.empty()) throw refused(key + ".trigger_line", "empty: name the TriggerSource line, e.g. Line0");
-  if (c.packet_size_bytes != 0 && (c.packet_size_bytes < 576 || c.packet_size_bytes > 9000))
-    throw refused(key + ".packet_size_bytes", std::to_string(c.packet_size_bytes) + " outside [576, 9000] (0 keeps the device's)");
+  if (c.packet_size_bytes != 0 && outside(c.packet_size_bytes, G::packet_size_bytes_limits))
+    throw refused(key + ".packet_size_bytes",
+                  std::to_string(c.packet_size_bytes) + " outside " + range(G::packet_size_bytes_limits) + " (0 keeps the device's)");
   if (c.mark_columns != 0 && c.mark_columns != 2)
     throw refused(key + ".mark_columns", std::to_string(c.mark_columns) + ": 2 (trigger counter in each line) or 0");
   if (c.mark_columns == 0 && c.profiles_per_frame != 1)
     throw refused(key + ".mark_columns", "0 needs profiles_per_frame 1: without a counter in each line a short frame cannot be told apart");
-  if (!std::isfinite(c.mono16_scale_mm) || c.mono16_scale_mm < 0.0 || !std::isfinite(c.mono16_offset_mm))
-    throw refused(key + ".mono16_scale_mm", "must be a finite number >= 0 (and mono16_offset_mm finite)");
-  if (!std::isfinite(c.exposure_us) || c.exposure_us < 0.0) throw refused(key + ".exposure_us", "must be finite and >= 0");
-  if (c.stream_buffers < 2 || c.stream_buffers > 1024)
-    throw refused(key + ".stream_buffers", std::to_string(c.stream_buffers) + " outside [2, 1024]");
+  if (outside(c.mono16_scale_mm, G::mono16_scale_mm_limits))
+    throw refused(key + ".mono16_scale_mm", fmt_number(c.mono16_scale_mm) + " outside " + range(G::mono16_scale_mm_limits));
+  if (outside(c.mono16_offset_mm, G::mono16_offset_mm_limits))
+    throw refused(key + ".mono16_offset_mm", fmt_number(c.mono16_offset_mm) + " outside " + range(G::mono16_offset_mm_limits));
+  if (outside(c.exposure_us, G::exposure_us_limits))
+    throw refused(key + ".exposure_us", fmt_number(c.exposure_us) + " outside " + range(G::exposure_us_limits));
+  if (outside(c.stream_buffers, G::stream_buffers_limits))
+    throw refused(key + ".stream_buffers", std::to_string(c.stream_buffers) + " outside " + range(G::stream_buffers_limits));
 }
 
 struct GenicamScanner::Impl {

@@ -18,15 +18,24 @@
 namespace scancell::drivers {
 
 struct GenicamConfig {
+  /// Each setting's range, declared here once: the daemon's config loader and check_genicam_config use them.
+  template <class T>
+  struct Limits {
+    T lo, hi;
+  };
   std::string device;                   // Aravis device id: IP address, serial number or user id
-  int profiles_per_frame = 16;          // Height, [1, 2048]
+  int profiles_per_frame = 16;          // Height
   std::string trigger_line = "Line0";   // TriggerSource for FrameStart (the line the trigger output drives)
-  int packet_size_bytes = 0;            // GevSCPSPacketSize, [576, 9000]; 0: keep the device's
+  int packet_size_bytes = 0;            // GevSCPSPacketSize; 0: keep the device's
   int mark_columns = 2;                 // 0 or 2: last columns of each line carry the 32-bit trigger counter
   double mono16_scale_mm = 0.0;         // Mono16 fallback only: mm per count (a Coord3D device states its own)
   double mono16_offset_mm = 0.0;
   double exposure_us = 0.0;             // ExposureTime; 0: keep the device's
-  int stream_buffers = 32;              // buffers queued on the stream, [2, 1024]
+  int stream_buffers = 32;              // buffers queued on the stream
+  static constexpr Limits<int> profiles_per_frame_limits{1, 2048}, packet_size_bytes_limits{576, 9000},
+      stream_buffers_limits{2, 1024};
+  static constexpr Limits<double> mono16_scale_mm_limits{0.0, 1.0}, mono16_offset_mm_limits{-10000.0, 10000.0},
+      exposure_us_limits{0.0, 1e6};
 };
 
 /// Refuses a configuration before any device is touched (DriverError refused, naming the key).
