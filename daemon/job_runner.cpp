@@ -4,6 +4,7 @@
 
 #include "daemon/acquire.hpp"
 #include "daemon/job_product.hpp"
+#include "daemon/job_result.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -36,77 +37,6 @@ std::string fmt(double v, int digits = 4) {
   return b;
 }
 
-/// The rough model's unmeasured rows by what keeps a job open: open (seen surface some view of this cell
-/// measures), unmeasurable (no candidate view does), guessed (hypothetical: the rough scan never saw it).
-struct RowTally {
-  std::size_t open = 0, guessed = 0, hypothetical = 0;  // hypothetical: guessed, with the unmeasurable ones
-  double unmeasured_area = 0.0, open_area = 0.0, impossible_area = 0.0, guessed_area = 0.0, hypothetical_area = 0.0;
-};
-
-RowTally tally_unmeasured(const sp::RoughModel& rough, const std::vector<std::uint32_t>& unmeasured,
-                          const std::vector<std::uint32_t>& unmeasurable) {
-  std::vector<std::uint8_t> impossible(rough.size(), 0);
-  for (auto r : unmeasurable) impossible[r] = 1;
-  RowTally t;
-  for (auto r : unmeasured) {
-    const double a = rough.area_mm2[r];
-    const bool guess = !rough.hypothetical.empty() && rough.hypothetical[r];
-    t.unmeasured_area += a;
-    if (guess) {
-      ++t.hypothetical;
-      t.hypothetical_area += a;
-    }
-    if (impossible[r]) {
-      t.impossible_area += a;
-    } else if (guess) {
-      ++t.guessed;
-      t.guessed_area += a;
-    } else {
-      ++t.open;
-      t.open_area += a;
-    }
-  }
-  return t;
-}
-
-/// The rows a round holds against itself: those a view predicted and measured no profile's worth of harm
-/// to. A row a view's sweep passed without a profile (a loaded host, a scanner that dropped frames) did not
-/// fail for its geometry, so that view's prediction of it is not held against it and the loop may aim at it
-/// again. The round info lists `view_rows` per view (plans before it had only `predicted_rows`: all held) and,
-/// added by the runner from the stored scans, `excused_rows` (view index -> rows passed without a profile).
-std::vector<std::uint32_t> held_rows(const json& info) {
-  if (!info.contains("view_rows") || !info.contains("excused_rows") || info.at("excused_rows").empty())
-    return info.value("predicted_rows", std::vector<std::uint32_t>{});
-  const auto& per_view = info.at("view_rows");
-  const auto& excused = info.at("excused_rows");
-  std::vector<std::uint32_t> held;
-  for (std::size_t v = 0; v < per_view.size(); ++v) {
-    auto rows = per_view[v].get<std::vector<std::uint32_t>>();
-    const auto ex = excused.find(std::to_string(v));
-    if (ex != excused.end()) {
-      auto skip = ex->get<std::vector<std::uint32_t>>();
-      std::sort(skip.begin(), skip.end());
-      rows.erase(std::remove_if(rows.begin(), rows.end(), [&](std::uint32_t r) { return std::binary_search(skip.begin(), skip.end(), r); }),
-                 rows.end());
-    }
-    held.insert(held.end(), rows.begin(), rows.end());
-  }
-  std::sort(held.begin(), held.end());
-  held.erase(std::unique(held.begin(), held.end()), held.end());
-  return held;
-}
-
-/// The closed loop's evidence: per row, how many executed rounds predicted it measurable while it is still
-/// unmeasured (each round's plan info keeps its predicted rows; what is measured now is the coverage).
-/// Rows a round predicted through views that lost profiles only are not counted (held_rows).
-std::vector<std::uint8_t> failure_counts(const std::vector<json>& round_infos, const std::vector<std::uint8_t>& measured) {
-  std::vector<std::uint8_t> fails(measured.size(), 0);
-  for (const auto& info : round_infos)
-    for (const auto row : held_rows(info))
-      if (row < fails.size() && !measured[row] && fails[row] < 255) ++fails[row];
-  return fails;
-}
-
 /// Planning that a pause, abort or shutdown stops at its next stage boundary (or inside the matrix build):
 /// the request becomes an Interrupted like one between moves; nothing of the plan is journalled.
 template <class Plan>
@@ -116,42 +46,6 @@ sp::ViewPlan plan_or_stop(Plan&& plan, const std::atomic<int>& stop) {
   } catch (const scancell::PlanCancelled& e) {
     throw Interrupted(static_cast<StopRequest>(stop.load()), std::string("during planning (") + e.what() + ")");
   }
-}
-
-/// Rows the closed loop gives up on (needs attention): predicted measurable by `retire_after` executed rounds
-/// and still unmeasured, or predicted by a replanning round that measured nothing new at all — that round's
-/// predictions did not hold anywhere, and the loop stops there, so its rows are not chased again either.
-std::vector<std::uint8_t> given_up_rows(const std::vector<json>& round_infos, const std::vector<std::uint8_t>& measured,
-                                        double measured_now, int retire_after) {
-  const std::vector<std::uint8_t> fails = failure_counts(round_infos, measured);
-  std::vector<std::uint8_t> out(fails.size(), 0);
-  for (std::size_t r = 0; r < fails.size(); ++r) out[r] = fails[r] >= retire_after;
-  if (round_infos.size() > 1) {
-    const json& last = round_infos.back();
-    if (measured_now <= last.value("measured_before", 0.0) + 1e-9)
-      for (const auto row : held_rows(last))
-        if (row < out.size() && !measured[row]) out[row] = 1;
-  }
-  return out;
-}
-
-/// Each executed round's predicted and realized gain (mm²): realized is what the measured coverage rose by
-/// from the round's start to the next round's start (or to `measured_now` for the last).
-json round_gains(const std::vector<json>& round_infos, double measured_now, double total_mm2) {
-  json out = json::array();
-  for (std::size_t k = 0; k < round_infos.size(); ++k) {
-    const json& info = round_infos[k];
-    const double before = info.value("measured_before", 0.0);
-    const double after = k + 1 < round_infos.size() ? round_infos[k + 1].value("measured_before", measured_now) : measured_now;
-    const double predicted = info.value("predicted_gain_mm2", 0.0), realized = (after - before) * total_mm2;
-    out.push_back({{"round", info.value("round", static_cast<int>(k))},
-                   {"views", info.value("views", 0)},
-                   {"predicted_gain_mm2", predicted},
-                   {"realized_gain_mm2", realized},
-                   {"realized_share", predicted > 0.0 ? realized / predicted : 0.0},
-                   {"under_20_percent", predicted > 0.0 && realized < 0.2 * predicted}});
-  }
-  return out;
 }
 
 /// The journal's record of each view of a plan: pose, scan length, axis targets, planned move and scan times.
@@ -330,115 +224,26 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
     if (state != JobState::aborted && settings_.next_setup_min_area_mm2 > 0.0 && t.unmeasured_area >= settings_.next_setup_min_area_mm2 &&
         !j.object.vertices.empty())
       result["next_setup"] = next_setup(j);
-    // The unmeasured regions as points (object frame) for a viewer.
-    std::filesystem::create_directories(settings_.jobs_dir / std::to_string(j.id));
-    const auto path = settings_.jobs_dir / std::to_string(j.id) / "unmeasured.xyz";
-    std::ofstream f(path);
-    f << "# rough-model rows not measured to the spec: x y z (mm, object frame) nx ny nz area_mm2\n";
-    for (auto r : rows) {
-      const auto& p = j.rough->points[r];
-      const auto& n = j.rough->normals[r];
-      f << p.x() << ' ' << p.y() << ' ' << p.z() << ' ' << n.x() << ' ' << n.y() << ' ' << n.z() << ' ' << j.rough->area_mm2[r] << "\n";
-    }
-    result["unmeasured_file"] = path.string();
+    const auto dir = settings_.jobs_dir / std::to_string(j.id);
+    result["unmeasured_file"] = write_unmeasured_rows(*j.rough, rows, dir).string();
     // The closed loop's account: what each round predicted and delivered, and the rows it gave up on.
     const std::vector<json> infos = round_infos(j);
     if (!infos.empty()) {
-      const json gains = round_gains(infos, j.progress.measured, j.rough->total_area_mm2);
-      json weak = json::array();
-      for (const auto& g : gains)
-        if (g.at("under_20_percent").get<bool>()) weak.push_back(g.at("round"));
-      result["round_gains"] = gains;
-      result["rounds_under_20_percent"] = weak;  // realized under 20 % of the predicted gain
       std::vector<std::uint8_t> measured = j.coverage->measured_rows();
       for (auto r : j.unmeasurable) measured[r] = 1;
-      const auto fails = failure_counts(infos, measured);
-      const auto given_up = given_up_rows(infos, measured, j.progress.measured, settings_.retire_after_failures);
-      std::size_t n = 0;
-      double area = 0.0;
-      const auto attention = settings_.jobs_dir / std::to_string(j.id) / "needs_attention.xyz";
-      std::ofstream fa(attention);
-      fa << "# rows predicted measurable by " << settings_.retire_after_failures
-         << " or more executed rounds, or by a replanning round that measured nothing new, and still unmeasured:"
-            " x y z (mm, object frame) nx ny nz area_mm2 rounds_failed\n";
-      for (std::size_t r = 0; r < fails.size(); ++r)
-        if (given_up[r]) {
-          ++n;
-          area += j.rough->area_mm2[r];
-          const auto& p = j.rough->points[r];
-          const auto& nn = j.rough->normals[r];
-          fa << p.x() << ' ' << p.y() << ' ' << p.z() << ' ' << nn.x() << ' ' << nn.y() << ' ' << nn.z() << ' '
-             << j.rough->area_mm2[r] << ' ' << int(fails[r]) << "\n";
-        }
-      result["needs_attention_rows"] = n;
-      result["needs_attention_area_mm2"] = area;
-      result["needs_attention_file"] = attention.string();
+      result.update(closed_loop_account(*j.rough, infos, measured, j.progress.measured, settings_.retire_after_failures, dir));
     }
   }
-  // Simulation: the same coverage of the rough model from where the samples really are (the simulator's
-  // ground-truth hit points), counting only samples the daemon stored within 3 × the precision spec of the
-  // true surface (along its normal: a slide along the surface does not make the data wrong, a step off it
-  // does). How far registration (or its absence) lets the measured figure be trusted.
-  // Ground truth exists only where the scanner is simulated in-process: a device on the wire (sim_gige, a
-  // real scanner) delivers what a real one does, and the checks that need the true hit points are skipped.
+  // Simulation: the checks against the object on the table. Ground truth exists only where the scanner is
+  // simulated in-process: a device on the wire (sim_gige, a real scanner) delivers what a real one does, and
+  // the checks that need the true hit points are skipped.
   const bool with_truth = std::all_of(images.begin(), images.end(), [](const sp::RangeImage& im) { return im.truth.size() == im.samples.size(); });
   if (!with_truth && !j.truth_object.vertices.empty())
     result["ground_truth_checks"] = "not run: the scans carry no simulation truth (the scanner is a device on the wire)";
-  if (state != JobState::aborted && !images.empty() && j.rough && !j.truth_object.vertices.empty() && with_truth) {
-    sp::MeasuredCoverage truth(*j.rough, j.spec, settings_.coverage);
-    const double tolerance = 3.0 * j.spec.precision_mm;
-    const sp::TriangleMesh& fine = j.truth_object;
-    double ss = 0.0, ssn = 0.0;
-    std::size_t n = 0, nn = 0, off = 0;
-    for (auto img : images) {
-      // The samples the daemon counted as compliant, as it counted them (their density from the stored,
-      // noisy positions), moved to where they really are.
-      std::vector<std::uint8_t> compliant = sp::MeasuredCoverage::compliant_samples(img, j.spec);
-      for (std::size_t k = 0; k < img.samples.size(); ++k) {
-        auto& smp = img.samples[k];
-        if (smp.valid()) {
-          const sp::SampleTruth& truth_k = img.truth[k];
-          const Eigen::Vector3d e = (smp.object_mm - truth_k.object_mm).cast<double>();
-          ss += e.squaredNorm();
-          ++n;
-          smp.object_mm = truth_k.object_mm;
-          if (truth_k.triangle >= fine.triangles.size()) continue;  // the plate
-          const auto& t = fine.triangles[truth_k.triangle];
-          const Eigen::Vector3d normal =
-              (fine.vertices[t[1]] - fine.vertices[t[0]]).cross(fine.vertices[t[2]] - fine.vertices[t[0]]).normalized();
-          const double en = std::abs(e.dot(normal));
-          ssn += en * en;
-          ++nn;
-          if (en > tolerance) {
-            compliant[k] = 0;
-            ++off;
-          }
-        }
-      }
-      truth.add(img, &compliant);
-    }
-    result["verified_coverage"] = truth.coverage();
-    // How far the stored samples are from the surface points the laser really hit (pose error left after
-    // registration, plus range noise): in 3-D, across the true surface, and the share farther across it than
-    // the tolerance.
-    result["sample_error_rms_mm"] = n ? std::sqrt(ss / static_cast<double>(n)) : 0.0;
-    result["sample_normal_error_rms_mm"] = nn ? std::sqrt(ssn / static_cast<double>(nn)) : 0.0;
-    result["samples_off_spec"] = nn ? static_cast<double>(off) / static_cast<double>(nn) : 0.0;
-  }
-  // Simulation: verified measurability of the stored scans against the object actually on the table.
-  if (state != JobState::aborted && !images.empty() && !j.truth_object.vertices.empty() && with_truth) {
-    const std::string truth = j.request.truth.empty() ? j.request.mesh : j.request.truth;
-    const sp::TriangleMesh& fine = j.truth_object;
-    const sp::Verification v = sp::verify_images(fine, j.spec, images);
-    result["verified_mv"] = v.mv;
-    result["verified_against"] = truth;
-    const auto dir = settings_.jobs_dir / std::to_string(j.id);
-    std::filesystem::create_directories(dir);
-    sp::write_measurability_png(fine, v.measured, (dir / "coverage.png").string());
-    sp::write_coverage_ply(fine, v.measured, (dir / "coverage.ply").string());
-    result["coverage_png"] = (dir / "coverage.png").string();
-    result["coverage_ply"] = (dir / "coverage.ply").string();
-  }
+  if (state != JobState::aborted && !images.empty() && !j.truth_object.vertices.empty() && with_truth)
+    result.update(simulation_truth_checks(images, j.rough ? &*j.rough : nullptr, j.spec, settings_.coverage, j.truth_object,
+                                          j.request.truth.empty() ? j.request.mesh : j.request.truth,
+                                          settings_.jobs_dir / std::to_string(j.id)));
   // The inspection report (issue 19): the cloud and the model against the reference, the submitted mesh (a
   // bounding-box job has none but, in simulation, the object on the table).
   const bool bbox = j.request.bbox_mm.has_value();
