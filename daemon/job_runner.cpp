@@ -269,15 +269,8 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
   transition(j, state, cause);
 }
 
-JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
-  Job j;
-  j.id = id;
-  j.progress.job = id;
-  const JobRecord rec = journal_.job(id);
-  j.progress.state = rec.state;
-  if (finished(rec.state)) return rec.state;
-  // Paused or faulted (before it started, or left so): only resume, which queues it again, makes it runnable.
-  if (rec.state == JobState::paused || rec.state == JobState::faulted) return rec.state;
+/// The job's request, spec, settings and object, read from the journal; a bad one faults the job (false).
+bool JobRunner::read_request(Job& j, const JobRecord& rec) {
   try {
     j.request = JobRequest::from_json(json::parse(rec.request_json));
     j.spec = j.request.spec.empty() ? models_.spec : sp::load_spec(j.request.spec);
@@ -291,8 +284,279 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
   } catch (const std::exception& e) {
     j.progress.fault_kind = "job";
     transition(j, JobState::faulted, std::string("job input: ") + e.what());
-    return JobState::faulted;
+    return false;
   }
+  return true;
+}
+
+/// Round 0: the first plan (with the resting-pose choice when placement is auto), journalled; a plan
+/// without views ends the job (stalled), which is returned.
+std::optional<JobState> JobRunner::plan_first_round(Job& j, const std::atomic<int>& stop) {
+  transition(j, JobState::planning);
+  sp::ViewPlan p = plan_or_stop([&] {
+    if (j.settings.placement.automatic)
+      return sp::plan_with_placement(j.object, models_.sensor, j.spec, j.settings, j.rough_options,
+                                     settings_.planner_threads, models_.cell, &stop);
+    return sp::plan_views(j.object, models_.sensor, j.spec, j.settings, j.rough_options, settings_.planner_threads,
+                          &models_.cell, nullptr, nullptr, &stop);
+  }, stop);
+  j.rough = p.rough;
+  j.unmeasurable = p.cover.unmeasurable_rows;
+  const std::vector<std::string> poses = view_records(p);
+  const double est = p.cover.cumulative_fraction.empty() ? 0.0 : p.cover.cumulative_fraction.back();
+  json info = {{"round", 0},
+               {"rows", p.rough.size()},
+               {"object_on_table", row_major_json(p.cell->object_on_table.matrix())},
+               {"estimated", est},
+               {"unmeasurable_rows", j.unmeasurable},
+               {"candidates", p.candidates},
+               {"views", p.views.size()},
+               {"predicted_rows", p.predicted_rows},
+               {"view_rows", p.view_rows},
+               {"predicted_gain_mm2", p.predicted_gain_mm2},
+               {"plan_s", p.times.total_s()}};
+  if (p.placement) {
+    info["placement"] = sp::placement_to_json(*p.placement);
+    journal_.event(j.id, "placement: " + p.placement->reason);
+  }
+  if (p.views.empty()) {
+    j.cell = *p.cell;
+    j.coverage = std::make_unique<sp::MeasuredCoverage>(*j.rough, j.spec, settings_.coverage);
+    finish(j, JobState::stalled, "the planner found no view that measures any of the rough model");
+    return JobState::stalled;
+  }
+  journal_.add_plan(j.id, 0, poses, info.dump());
+  return std::nullopt;
+}
+
+/// The job's state from the journal, as after a restart: placement and unmeasurable rows of round 0, the
+/// rough model, the measured coverage and the registration cloud from every stored scan, and the head (with
+/// what stands on the table, in simulation).
+void JobRunner::restore(Job& j, const std::vector<std::int64_t>& plans) {
+  // The first round's info carries the placement and the rows nothing can measure in this cell.
+  const json info0 = json::parse(journal_.plan_info(plans.front()));
+  j.cell = models_.cell;
+  j.cell.object_on_table = Eigen::Isometry3d(scancell::matrix4_from_row_major(info0.at("object_on_table"), "plan info object_on_table"));
+  j.unmeasurable = info0.at("unmeasurable_rows").get<std::vector<std::uint32_t>>();
+  if (info0.contains("placement")) j.placement = info0.at("placement");
+  if (!j.rough) j.rough = sp::build_rough_model(j.object, j.rough_options);
+  if (j.rough->size() != info0.at("rows").get<std::size_t>())
+    throw scancell::DataError("job " + std::to_string(j.id) + ": the rough model now has " + std::to_string(j.rough->size()) +
+                        " rows, the journalled plan " + std::to_string(info0.at("rows").get<std::size_t>()) +
+                        " (mesh file or planner changed since the job was planned)");
+  j.coverage = std::make_unique<sp::MeasuredCoverage>(*j.rough, j.spec, settings_.coverage);
+  // Views register to the object's mesh as given, not to the planner's decimated rows: every coarsening is
+  // a bias of registration along the views' rays (what is left of it the PN patches take out). A fused
+  // rough model is the exception: at full resolution it is a voxel staircase whose face normals scatter by
+  // tens of degrees, so its decimation (the rows' mesh, flat where the object is) is the better target.
+  if (settings_.register_views)
+    j.cloud = std::make_unique<sp::ModelCloud>(sp::ModelCloud::from_mesh(j.request.bbox_mm ? j.rough->mesh() : j.object, 1.0));
+  std::vector<Eigen::Vector3d> cloud_points, cloud_normals;
+  for (auto plan : plans) {
+    const auto rows_of_view = json::parse(journal_.plan_info(plan)).value("view_rows", std::vector<std::vector<std::uint32_t>>{});
+    for (const auto& s : journal_.scans(plan)) {
+      if (!s.note.empty()) continue;  // stored, but not counted (its registration failed)
+      const sp::RangeImage img = sp::range_image_from_ply(journal_.read_scan(s), s.file);
+      if (s.view >= 0 && static_cast<std::size_t>(s.view) < rows_of_view.size())
+        note_lost_profiles(j, plan, s.view, img, rows_of_view[static_cast<std::size_t>(s.view)]);
+      j.coverage->add(img);
+      if (j.cloud) sp::image_points_normals(img, 3, cloud_points, cloud_normals);
+    }
+  }
+  if (j.cloud && !cloud_points.empty()) j.cloud->add(cloud_points, cloud_normals);
+  j.progress.measured = j.coverage->coverage();
+
+  // What is on the table, for a simulated head: the object (ground truth) in the plan's object frame, and
+  // the plate.
+  if (j.request.bbox_mm) {
+    j.truth_object = j.truth_table;
+    const Eigen::Isometry3d table_to_object = j.cell.object_on_table.inverse();
+    for (auto& v : j.truth_object.vertices) v = table_to_object * v;
+  } else {
+    j.truth_object = load_object(j.request.truth.empty() ? j.request.mesh : j.request.truth, j.request.fit_mm);
+  }
+  j.head = heads_(sp::with_fixtures(j.truth_object, j.cell), j.truth_object.triangles.size(), j.cell);
+}
+
+/// Round `plans.back()`: its views executed from the first unfinished one, then the cloud so far written.
+/// Returns the round's plan info.
+json JobRunner::execute_round(Job& j, const std::vector<std::int64_t>& plans, const std::atomic<int>& stop) {
+  const std::int64_t plan = plans.back();
+  j.round = static_cast<int>(plans.size()) - 1;
+  j.progress.round = j.round;
+  const json info = json::parse(journal_.plan_info(plan));
+  const auto views = journal_.views(plan);
+  j.view_rows = info.value("view_rows", std::vector<std::vector<std::uint32_t>>{});
+  j.progress.views = static_cast<int>(views.size());
+  j.progress.view = 0;
+  // The estimate for the whole model: measured before this round plus the round's share of the rest.
+  double measured_before = j.progress.measured;
+  j.estimated_total = j.round == 0 ? info.at("estimated").get<double>()
+                                   : info.value("estimated_total", measured_before);
+  j.progress.estimated = j.estimated_total;
+  j.planned_view_s.clear();
+  for (const auto& v : views) {
+    const json pj = json::parse(v.pose_json);
+    j.planned_view_s.push_back(pj.value("move_s", 0.0) + pj.value("scan_s", 0.0));
+  }
+  if (journal_.first_unfinished_view(plan)) {
+    const int done_views = static_cast<int>(std::count_if(views.begin(), views.end(), [](const ViewRecord& v) { return v.stored; }));
+    transition(j, JobState::executing,
+               "round " + std::to_string(j.round) + ", " + std::to_string(views.size()) + " views" +
+                   (done_views ? ", resuming at view " + std::to_string(done_views + 1) : ""));
+    for (const auto& v : views) {
+      if (v.stored) continue;
+      const auto why = static_cast<StopRequest>(stop.load());
+      if (why != StopRequest::none) throw Interrupted(why, "before view " + std::to_string(v.index + 1));
+      execute_view(j, plan, v, stop);
+    }
+  }
+  transition(j, JobState::verifying);
+  {
+    // Kept current after each round: the registered cloud so far (durable, like the scans).
+    const CloudSummary c =
+        write_job_cloud(load_job_views(journal_, j.id), j.id, j.spec, settings_.jobs_dir / std::to_string(j.id) / "cloud.ply", false,
+                        settings_.cloud_spacing_mm);
+    journal_.event(j.id, "round " + std::to_string(j.round) + ": cloud.ply holds " + std::to_string(c.points) +
+                           " spec-compliant samples from " + std::to_string(c.views) + " views");
+  }
+  return info;
+}
+
+/// After a round: its predicted and realized gain and the rows it failed, then the end (done, or stalled:
+/// every open row given up, max_rounds, nothing new measured, a replan with no view or too little gain per
+/// view) or the next round's plan, journalled. Returns the end state, or nothing to run the next round.
+std::optional<JobState> JobRunner::close_or_replan(Job& j, std::int64_t plan, const json& info, const std::atomic<int>& stop) {
+  const std::vector<json> infos = round_infos(j);
+  const double total_mm2 = j.rough->total_area_mm2;
+  {
+    const json g = round_gains(infos, j.progress.measured, total_mm2).back();
+    journal_.event(j.id, "round " + std::to_string(j.round) + ": " + std::to_string(info.value("views", 0)) + " views, predicted gain " +
+                           fmt(g.at("predicted_gain_mm2").get<double>(), 1) + " mm2, realized " +
+                           fmt(g.at("realized_gain_mm2").get<double>(), 1) + " mm2" +
+                           (g.at("under_20_percent").get<bool>() ? " (under 20 % of the prediction)" : ""));
+    std::vector<std::uint32_t> passed;
+    for (const auto& [view, rows] : j.excused[plan]) passed.insert(passed.end(), rows.begin(), rows.end());
+    std::sort(passed.begin(), passed.end());
+    passed.erase(std::unique(passed.begin(), passed.end()), passed.end());
+    if (!passed.empty())
+      journal_.event(j.id, "round " + std::to_string(j.round) + ": " + std::to_string(passed.size()) + " predicted rows lay where " +
+                             std::to_string(j.excused[plan].size()) + (j.excused[plan].size() == 1 ? " view's sweep" : " views' sweeps") +
+                             " lost profiles; not counted as failures");
+  }
+  // Rows the executed rounds were predicted to measure and did not: retired after
+  // jobs.retire_after_failures such rounds (needs attention), down-weighted before.
+  std::vector<std::uint8_t> measured_now = j.coverage->measured_rows();
+  for (auto r : j.unmeasurable) measured_now[r] = 1;
+  const std::vector<std::uint8_t> fails = failure_counts(infos, measured_now);
+  const std::vector<std::uint8_t> retired =
+      given_up_rows(infos, measured_now, j.progress.measured, settings_.retire_after_failures);
+  std::size_t n_retired = 0;
+  double retired_area = 0.0;
+  for (std::size_t r = 0; r < fails.size(); ++r)
+    if (retired[r]) {
+      ++n_retired;
+      retired_area += j.rough->area_mm2[r];
+    }
+  // A hypothetical row (the rough scan never saw that surface) that views aimed at and did not measure
+  // is most likely not surface at all: the real one lies deeper, and the views measured it instead.
+  const RowTally t = tally_unmeasured(*j.rough, j.coverage->unmeasured_rows(), j.unmeasurable);
+  const std::size_t open = t.open, guessed = t.guessed;
+  const double open_area = t.open_area, impossible_area = t.impossible_area, guessed_area = t.guessed_area;
+  const double total = j.rough->total_area_mm2;
+  const std::string summary = "measured " + fmt(j.progress.measured) + " of the rough model; " + std::to_string(open) +
+                              " measurable rows left (" + fmt(open_area, 1) + " mm2), " +
+                              fmt(impossible_area, 1) + " mm2 no view in this cell can measure" +
+                              (guessed ? ", " + std::to_string(guessed) + " hypothetical rows unconfirmed (" + fmt(guessed_area, 1) + " mm2)" : "");
+  journal_.event(j.id, summary);
+  // Hypothetical rows are chased for one replanning round (views aimed there explore what the rough scan
+  // missed); after that, only measurable rows of seen surface keep the job open.
+  if (open == 0 && (guessed == 0 || j.round >= 1)) {
+    finish(j, JobState::done, "spec met: " + summary);
+    return JobState::done;
+  }
+  std::size_t open_retired = 0;
+  for (auto r : j.coverage->unmeasured_rows())
+    open_retired += retired[r] && (j.rough->hypothetical.empty() || !j.rough->hypothetical[r]);
+  if (open_retired == open && (guessed == 0 || j.round >= 1)) {
+    finish(j, JobState::stalled, std::to_string(n_retired) + " rows (" + fmt(retired_area, 1) + " mm2) need attention: predicted measurable by " +
+                                     std::to_string(settings_.retire_after_failures) +
+                                     " rounds, or by a round that measured nothing new, and not measured; " + summary);
+    return JobState::stalled;
+  }
+  if (j.round + 1 >= settings_.max_rounds) {
+    finish(j, JobState::stalled, "after " + std::to_string(j.round + 1) + " rounds: " + summary);
+    return JobState::stalled;
+  }
+  if (j.round > 0 && j.progress.measured <= info.value("measured_before", 0.0) + 1e-9) {
+    finish(j, JobState::stalled, "round " + std::to_string(j.round) + " measured nothing new; " + std::to_string(n_retired) +
+                                     " rows (" + fmt(retired_area, 1) + " mm2) need attention: " + summary);
+    return JobState::stalled;
+  }
+  transition(j, JobState::replanning, std::to_string(open) + " rows left");
+  sp::PlannerSettings replan = j.settings;
+  // Later rounds go after the leftovers only; their views register to the model through the rows they
+  // share with it, not through each other, so the between-view registration constraint is dropped.
+  if (replan.cover.mode == sp::CoverMode::constrained) replan.cover.mode = sp::CoverMode::greedy;
+  // The single shot leaves slivers under cover.min_view_gain_mm2 to the loop: here every measurable row is
+  // chased (down-weighted rows included); the loop's own stop is jobs.min_gain_per_view_mm2 and retirement.
+  replan.cover.min_view_gain = 0.0;
+  // Nothing can measure the unmeasurable rows and the retired ones failed too often: neither is chased.
+  // A row that failed once weighs less, so no view is planned chiefly for it.
+  std::vector<std::uint8_t> measured = measured_now;
+  std::vector<double> weight_scale(measured.size(), 1.0);
+  for (std::size_t r = 0; r < measured.size(); ++r) {
+    if (retired[r]) measured[r] = 1;
+    else if (fails[r] > 0) weight_scale[r] = settings_.failed_row_weight;
+  }
+  sp::ViewPlan p = plan_or_stop([&] {
+    // The object rests as round 0 placed it (the configured or the chosen orientation).
+    sp::CellModel resting = models_.cell;
+    resting.object_on_table.linear() = j.cell.object_on_table.linear();
+    return sp::plan_views(j.object, models_.sensor, j.spec, replan, j.rough_options, settings_.planner_threads,
+                          &resting, &measured, &weight_scale, &stop);
+  }, stop);
+  if (p.views.empty()) {
+    finish(j, JobState::stalled, "replan adds nothing: " + summary);
+    return JobState::stalled;
+  }
+  const double gain_per_view = p.predicted_gain_mm2 / static_cast<double>(p.views.size());
+  if (gain_per_view < settings_.min_gain_per_view_mm2) {
+    finish(j, JobState::stalled, "the next round would gain " + fmt(gain_per_view, 2) + " mm2 per view (" +
+                                     std::to_string(p.views.size()) + " views), under jobs.min_gain_per_view_mm2 " +
+                                     fmt(settings_.min_gain_per_view_mm2, 1) + ": " + summary);
+    return JobState::stalled;
+  }
+  const std::vector<std::string> poses = view_records(p);
+  const double est_rest = p.cover.cumulative_fraction.empty() ? 0.0 : p.cover.cumulative_fraction.back();
+  double rest_area = 0.0;
+  for (std::size_t r = 0; r < measured.size(); ++r) rest_area += measured[r] ? 0.0 : j.rough->area_mm2[r];
+  const json rinfo = {{"round", j.round + 1},
+                      {"rows", j.rough->size()},
+                      {"estimated", est_rest},
+                      {"estimated_total", j.progress.measured + est_rest * rest_area / total},
+                      {"measured_before", j.progress.measured},
+                      {"candidates", p.candidates},
+                      {"views", p.views.size()},
+                      {"predicted_rows", p.predicted_rows},
+                      {"view_rows", p.view_rows},
+                      {"predicted_gain_mm2", p.predicted_gain_mm2},
+                      {"retired_rows", n_retired},
+                      {"plan_s", p.times.total_s()}};
+  journal_.add_plan(j.id, j.round + 1, poses, rinfo.dump());
+  return std::nullopt;
+}
+
+JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
+  Job j;
+  j.id = id;
+  j.progress.job = id;
+  const JobRecord rec = journal_.job(id);
+  j.progress.state = rec.state;
+  if (finished(rec.state)) return rec.state;
+  // Paused or faulted (before it started, or left so): only resume, which queues it again, makes it runnable.
+  if (rec.state == JobState::paused || rec.state == JobState::faulted) return rec.state;
+  if (!read_request(j, rec)) return JobState::faulted;
 
   try {
     // Rounds 0, 1, ... are plan rounds; round -1 is the rough scan of a bounding-box job.
@@ -303,246 +567,13 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
       return out;
     };
     if (j.request.bbox_mm) rough_scan(j, stop);
-    auto plans = round_plans();
-    if (plans.empty()) {
-      transition(j, JobState::planning);
-      sp::ViewPlan p = plan_or_stop([&] {
-        if (j.settings.placement.automatic)
-          return sp::plan_with_placement(j.object, models_.sensor, j.spec, j.settings, j.rough_options,
-                                         settings_.planner_threads, models_.cell, &stop);
-        return sp::plan_views(j.object, models_.sensor, j.spec, j.settings, j.rough_options, settings_.planner_threads,
-                              &models_.cell, nullptr, nullptr, &stop);
-      }, stop);
-      j.rough = p.rough;
-      j.unmeasurable = p.cover.unmeasurable_rows;
-      const std::vector<std::string> poses = view_records(p);
-      const double est = p.cover.cumulative_fraction.empty() ? 0.0 : p.cover.cumulative_fraction.back();
-      json info = {{"round", 0},
-                         {"rows", p.rough.size()},
-                         {"object_on_table", row_major_json(p.cell->object_on_table.matrix())},
-                         {"estimated", est},
-                         {"unmeasurable_rows", j.unmeasurable},
-                         {"candidates", p.candidates},
-                         {"views", p.views.size()},
-                         {"predicted_rows", p.predicted_rows},
-                         {"view_rows", p.view_rows},
-                         {"predicted_gain_mm2", p.predicted_gain_mm2},
-                         {"plan_s", p.times.total_s()}};
-      if (p.placement) {
-        info["placement"] = sp::placement_to_json(*p.placement);
-        journal_.event(id, "placement: " + p.placement->reason);
-      }
-      if (p.views.empty()) {
-        j.cell = *p.cell;
-        j.coverage = std::make_unique<sp::MeasuredCoverage>(*j.rough, j.spec, settings_.coverage);
-        finish(j, JobState::stalled, "the planner found no view that measures any of the rough model");
-        return JobState::stalled;
-      }
-      journal_.add_plan(id, 0, poses, info.dump());
-      plans = round_plans();
-    }
-    // The first round's info carries the placement and the rows nothing can measure in this cell.
-    const json info0 = json::parse(journal_.plan_info(plans.front()));
-    j.cell = models_.cell;
-    j.cell.object_on_table = Eigen::Isometry3d(scancell::matrix4_from_row_major(info0.at("object_on_table"), "plan info object_on_table"));
-    j.unmeasurable = info0.at("unmeasurable_rows").get<std::vector<std::uint32_t>>();
-    if (info0.contains("placement")) j.placement = info0.at("placement");
-    if (!j.rough) j.rough = sp::build_rough_model(j.object, j.rough_options);
-    if (j.rough->size() != info0.at("rows").get<std::size_t>())
-      throw scancell::DataError("job " + std::to_string(id) + ": the rough model now has " + std::to_string(j.rough->size()) +
-                          " rows, the journalled plan " + std::to_string(info0.at("rows").get<std::size_t>()) +
-                          " (mesh file or planner changed since the job was planned)");
-    j.coverage = std::make_unique<sp::MeasuredCoverage>(*j.rough, j.spec, settings_.coverage);
-    // Views register to the object's mesh as given, not to the planner's decimated rows: every coarsening is
-    // a bias of registration along the views' rays (what is left of it the PN patches take out). A fused
-    // rough model is the exception: at full resolution it is a voxel staircase whose face normals scatter by
-    // tens of degrees, so its decimation (the rows' mesh, flat where the object is) is the better target.
-    if (settings_.register_views)
-      j.cloud = std::make_unique<sp::ModelCloud>(sp::ModelCloud::from_mesh(j.request.bbox_mm ? j.rough->mesh() : j.object, 1.0));
-    std::vector<Eigen::Vector3d> cloud_points, cloud_normals;
-    for (auto plan : plans) {
-      const auto rows_of_view = json::parse(journal_.plan_info(plan)).value("view_rows", std::vector<std::vector<std::uint32_t>>{});
-      for (const auto& s : journal_.scans(plan)) {
-        if (!s.note.empty()) continue;  // stored, but not counted (its registration failed)
-        const sp::RangeImage img = sp::range_image_from_ply(journal_.read_scan(s), s.file);
-        if (s.view >= 0 && static_cast<std::size_t>(s.view) < rows_of_view.size())
-          note_lost_profiles(j, plan, s.view, img, rows_of_view[static_cast<std::size_t>(s.view)]);
-        j.coverage->add(img);
-        if (j.cloud) sp::image_points_normals(img, 3, cloud_points, cloud_normals);
-      }
-    }
-    if (j.cloud && !cloud_points.empty()) j.cloud->add(cloud_points, cloud_normals);
-    j.progress.measured = j.coverage->coverage();
-
-    // What is on the table, for a simulated head: the object (ground truth) in the plan's object frame, and
-    // the plate.
-    if (j.request.bbox_mm) {
-      j.truth_object = j.truth_table;
-      const Eigen::Isometry3d table_to_object = j.cell.object_on_table.inverse();
-      for (auto& v : j.truth_object.vertices) v = table_to_object * v;
-    } else {
-      j.truth_object = load_object(j.request.truth.empty() ? j.request.mesh : j.request.truth, j.request.fit_mm);
-    }
-    j.head = heads_(sp::with_fixtures(j.truth_object, j.cell), j.truth_object.triangles.size(), j.cell);
-
+    if (round_plans().empty())
+      if (const auto end = plan_first_round(j, stop)) return *end;
+    restore(j, round_plans());
     while (true) {
-      const std::int64_t plan = plans.back();
-      j.round = static_cast<int>(plans.size()) - 1;
-      j.progress.round = j.round;
-      const json info = json::parse(journal_.plan_info(plan));
-      const auto views = journal_.views(plan);
-      j.view_rows = info.value("view_rows", std::vector<std::vector<std::uint32_t>>{});
-      j.progress.views = static_cast<int>(views.size());
-      j.progress.view = 0;
-      // The estimate for the whole model: measured before this round plus the round's share of the rest.
-      double measured_before = j.progress.measured;
-      j.estimated_total = j.round == 0 ? info.at("estimated").get<double>()
-                                       : info.value("estimated_total", measured_before);
-      j.progress.estimated = j.estimated_total;
-      j.planned_view_s.clear();
-      for (const auto& v : views) {
-        const json pj = json::parse(v.pose_json);
-        j.planned_view_s.push_back(pj.value("move_s", 0.0) + pj.value("scan_s", 0.0));
-      }
-      if (journal_.first_unfinished_view(plan)) {
-        const int done_views = static_cast<int>(std::count_if(views.begin(), views.end(), [](const ViewRecord& v) { return v.stored; }));
-        transition(j, JobState::executing,
-                   "round " + std::to_string(j.round) + ", " + std::to_string(views.size()) + " views" +
-                       (done_views ? ", resuming at view " + std::to_string(done_views + 1) : ""));
-        for (const auto& v : views) {
-          if (v.stored) continue;
-          const auto why = static_cast<StopRequest>(stop.load());
-          if (why != StopRequest::none) throw Interrupted(why, "before view " + std::to_string(v.index + 1));
-          execute_view(j, plan, v, stop);
-        }
-      }
-      transition(j, JobState::verifying);
-      {
-        // Kept current after each round: the registered cloud so far (durable, like the scans).
-        const CloudSummary c =
-            write_job_cloud(load_job_views(journal_, id), id, j.spec, settings_.jobs_dir / std::to_string(id) / "cloud.ply", false,
-                            settings_.cloud_spacing_mm);
-        journal_.event(id, "round " + std::to_string(j.round) + ": cloud.ply holds " + std::to_string(c.points) +
-                               " spec-compliant samples from " + std::to_string(c.views) + " views");
-      }
-      const std::vector<json> infos = round_infos(j);
-      const double total_mm2 = j.rough->total_area_mm2;
-      {
-        const json g = round_gains(infos, j.progress.measured, total_mm2).back();
-        journal_.event(id, "round " + std::to_string(j.round) + ": " + std::to_string(views.size()) + " views, predicted gain " +
-                               fmt(g.at("predicted_gain_mm2").get<double>(), 1) + " mm2, realized " +
-                               fmt(g.at("realized_gain_mm2").get<double>(), 1) + " mm2" +
-                               (g.at("under_20_percent").get<bool>() ? " (under 20 % of the prediction)" : ""));
-        std::vector<std::uint32_t> passed;
-        for (const auto& [view, rows] : j.excused[plan]) passed.insert(passed.end(), rows.begin(), rows.end());
-        std::sort(passed.begin(), passed.end());
-        passed.erase(std::unique(passed.begin(), passed.end()), passed.end());
-        if (!passed.empty())
-          journal_.event(id, "round " + std::to_string(j.round) + ": " + std::to_string(passed.size()) + " predicted rows lay where " +
-                                 std::to_string(j.excused[plan].size()) + (j.excused[plan].size() == 1 ? " view's sweep" : " views' sweeps") +
-                                 " lost profiles; not counted as failures");
-      }
-      // Rows the executed rounds were predicted to measure and did not: retired after
-      // jobs.retire_after_failures such rounds (needs attention), down-weighted before.
-      std::vector<std::uint8_t> measured_now = j.coverage->measured_rows();
-      for (auto r : j.unmeasurable) measured_now[r] = 1;
-      const std::vector<std::uint8_t> fails = failure_counts(infos, measured_now);
-      const std::vector<std::uint8_t> retired =
-          given_up_rows(infos, measured_now, j.progress.measured, settings_.retire_after_failures);
-      std::size_t n_retired = 0;
-      double retired_area = 0.0;
-      for (std::size_t r = 0; r < fails.size(); ++r)
-        if (retired[r]) {
-          ++n_retired;
-          retired_area += j.rough->area_mm2[r];
-        }
-      // A hypothetical row (the rough scan never saw that surface) that views aimed at and did not measure
-      // is most likely not surface at all: the real one lies deeper, and the views measured it instead.
-      const RowTally t = tally_unmeasured(*j.rough, j.coverage->unmeasured_rows(), j.unmeasurable);
-      const std::size_t open = t.open, guessed = t.guessed;
-      const double open_area = t.open_area, impossible_area = t.impossible_area, guessed_area = t.guessed_area;
-      const double total = j.rough->total_area_mm2;
-      const std::string summary = "measured " + fmt(j.progress.measured) + " of the rough model; " + std::to_string(open) +
-                                  " measurable rows left (" + fmt(open_area, 1) + " mm2), " +
-                                  fmt(impossible_area, 1) + " mm2 no view in this cell can measure" +
-                                  (guessed ? ", " + std::to_string(guessed) + " hypothetical rows unconfirmed (" + fmt(guessed_area, 1) + " mm2)" : "");
-      journal_.event(id, summary);
-      // Hypothetical rows are chased for one replanning round (views aimed there explore what the rough scan
-      // missed); after that, only measurable rows of seen surface keep the job open.
-      if (open == 0 && (guessed == 0 || j.round >= 1)) {
-        finish(j, JobState::done, "spec met: " + summary);
-        return JobState::done;
-      }
-      std::size_t open_retired = 0;
-      for (auto r : j.coverage->unmeasured_rows())
-        open_retired += retired[r] && (j.rough->hypothetical.empty() || !j.rough->hypothetical[r]);
-      if (open_retired == open && (guessed == 0 || j.round >= 1)) {
-        finish(j, JobState::stalled, std::to_string(n_retired) + " rows (" + fmt(retired_area, 1) + " mm2) need attention: predicted measurable by " +
-                                         std::to_string(settings_.retire_after_failures) +
-                                         " rounds, or by a round that measured nothing new, and not measured; " + summary);
-        return JobState::stalled;
-      }
-      if (j.round + 1 >= settings_.max_rounds) {
-        finish(j, JobState::stalled, "after " + std::to_string(j.round + 1) + " rounds: " + summary);
-        return JobState::stalled;
-      }
-      if (j.round > 0 && j.progress.measured <= info.value("measured_before", 0.0) + 1e-9) {
-        finish(j, JobState::stalled, "round " + std::to_string(j.round) + " measured nothing new; " + std::to_string(n_retired) +
-                                         " rows (" + fmt(retired_area, 1) + " mm2) need attention: " + summary);
-        return JobState::stalled;
-      }
-      transition(j, JobState::replanning, std::to_string(open) + " rows left");
-      sp::PlannerSettings replan = j.settings;
-      // Later rounds go after the leftovers only; their views register to the model through the rows they
-      // share with it, not through each other, so the between-view registration constraint is dropped.
-      if (replan.cover.mode == sp::CoverMode::constrained) replan.cover.mode = sp::CoverMode::greedy;
-      // The single shot leaves slivers under cover.min_view_gain_mm2 to the loop: here every measurable row is
-      // chased (down-weighted rows included); the loop's own stop is jobs.min_gain_per_view_mm2 and retirement.
-      replan.cover.min_view_gain = 0.0;
-      // Nothing can measure the unmeasurable rows and the retired ones failed too often: neither is chased.
-      // A row that failed once weighs less, so no view is planned chiefly for it.
-      std::vector<std::uint8_t> measured = measured_now;
-      std::vector<double> weight_scale(measured.size(), 1.0);
-      for (std::size_t r = 0; r < measured.size(); ++r) {
-        if (retired[r]) measured[r] = 1;
-        else if (fails[r] > 0) weight_scale[r] = settings_.failed_row_weight;
-      }
-      sp::ViewPlan p = plan_or_stop([&] {
-        // The object rests as round 0 placed it (the configured or the chosen orientation).
-        sp::CellModel resting = models_.cell;
-        resting.object_on_table.linear() = j.cell.object_on_table.linear();
-        return sp::plan_views(j.object, models_.sensor, j.spec, replan, j.rough_options, settings_.planner_threads,
-                              &resting, &measured, &weight_scale, &stop);
-      }, stop);
-      if (p.views.empty()) {
-        finish(j, JobState::stalled, "replan adds nothing: " + summary);
-        return JobState::stalled;
-      }
-      const double gain_per_view = p.predicted_gain_mm2 / static_cast<double>(p.views.size());
-      if (gain_per_view < settings_.min_gain_per_view_mm2) {
-        finish(j, JobState::stalled, "the next round would gain " + fmt(gain_per_view, 2) + " mm2 per view (" +
-                                         std::to_string(p.views.size()) + " views), under jobs.min_gain_per_view_mm2 " +
-                                         fmt(settings_.min_gain_per_view_mm2, 1) + ": " + summary);
-        return JobState::stalled;
-      }
-      const std::vector<std::string> poses = view_records(p);
-      const double est_rest = p.cover.cumulative_fraction.empty() ? 0.0 : p.cover.cumulative_fraction.back();
-      double rest_area = 0.0;
-      for (std::size_t r = 0; r < measured.size(); ++r) rest_area += measured[r] ? 0.0 : j.rough->area_mm2[r];
-      const json rinfo = {{"round", j.round + 1},
-                          {"rows", j.rough->size()},
-                          {"estimated", est_rest},
-                          {"estimated_total", j.progress.measured + est_rest * rest_area / total},
-                          {"measured_before", j.progress.measured},
-                          {"candidates", p.candidates},
-                          {"views", p.views.size()},
-                          {"predicted_rows", p.predicted_rows},
-                          {"view_rows", p.view_rows},
-                          {"predicted_gain_mm2", p.predicted_gain_mm2},
-                          {"retired_rows", n_retired},
-                          {"plan_s", p.times.total_s()}};
-      journal_.add_plan(id, j.round + 1, poses, rinfo.dump());
-      plans = round_plans();
+      const auto plans = round_plans();
+      const json info = execute_round(j, plans, stop);
+      if (const auto end = close_or_replan(j, plans.back(), info, stop)) return *end;
     }
   } catch (const Interrupted& e) {
     positioner_.halt_all();

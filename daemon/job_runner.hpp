@@ -106,6 +106,11 @@ class JobRunner {
 
  private:
   struct Job;
+  bool read_request(Job& j, const JobRecord& rec);
+  std::optional<JobState> plan_first_round(Job& j, const std::atomic<int>& stop);
+  void restore(Job& j, const std::vector<std::int64_t>& plans);
+  nlohmann::json execute_round(Job& j, const std::vector<std::int64_t>& plans, const std::atomic<int>& stop);
+  std::optional<JobState> close_or_replan(Job& j, std::int64_t plan, const nlohmann::json& info, const std::atomic<int>& stop);
   void execute_view(Job& j, std::int64_t plan, const ViewRecord& v, const std::atomic<int>& stop);
   /// The rough scan of a job given a bounding box: exploration views, stored, fused into jobs/ID/rough.off.
   void rough_scan(Job& j, const std::atomic<int>& stop);
