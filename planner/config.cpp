@@ -129,6 +129,22 @@ ModelSpec load_spec(const std::filesystem::path& file) {
   return spec_from(y, file.string(), file.stem().string());
 }
 
+namespace {
+
+/// The detuned tests' margins (thesis 7.4.7) from a mapping: every key optional, none negative.
+Countermeasures parse_countermeasures(Section k) {
+  Countermeasures cm;
+  cm.frustum_detune = k.non_negative("frustum_detune", 0.0);
+  if (!(cm.frustum_detune < 0.9)) k.fail(k.key_path("frustum_detune"), "must be in [0, 0.9)");
+  cm.dof_margin_mm = k.non_negative("dof_margin_mm", 0.0);
+  cm.compliance_buffer = k.non_negative("compliance_buffer", 0.0);
+  cm.visibility_margin_mm = k.non_negative("visibility_margin_mm", 0.0);
+  k.finish();
+  return cm;
+}
+
+}  // namespace
+
 PlannerSettings load_planner_settings(const std::filesystem::path& file) {
   YAML::Node root;
   Section y = open_root(file, root);
@@ -220,16 +236,11 @@ PlannerSettings load_planner_settings(const std::filesystem::path& file) {
         else if (v == "none") p.countermeasures_from_cell = false;
         else m.fail(m.key_path("countermeasures"), "must be auto, none or a mapping, got '" + v + "'");
       } else {
-        Section k = m.section("countermeasures");
-        auto& cm = p.matrix.countermeasures;
-        cm.frustum_detune = k.non_negative("frustum_detune", 0.0);
-        if (!(cm.frustum_detune < 0.9)) k.fail(k.key_path("frustum_detune"), "must be in [0, 0.9)");
-        cm.dof_margin_mm = k.non_negative("dof_margin_mm", 0.0);
-        cm.compliance_buffer = k.non_negative("compliance_buffer", 0.0);
-        cm.visibility_margin_mm = k.non_negative("visibility_margin_mm", 0.0);
-        k.finish();
+        p.matrix.countermeasures = parse_countermeasures(m.section("countermeasures"));
       }
     }
+    if (m.has("free_space_countermeasures"))
+      p.free_space_countermeasures = parse_countermeasures(m.section("free_space_countermeasures"));
     m.finish();
   }
   y.finish();

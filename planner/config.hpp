@@ -33,6 +33,14 @@ struct PlannerSettings {
   PlacementSettings placement;
   /// matrix.countermeasures: auto — size them from the cell's pose-error model (tables 7.3-7.5); needs a cell.
   bool countermeasures_from_cell = false;
+  /// matrix.free_space_countermeasures: a margin against the rough model's own error, for plans without a cell
+  /// (merged, field by field the larger, with matrix.countermeasures). The rough model is the fine surface
+  /// decimated: its normals and sightlines are right at its own resolution, so an element at the edge of the
+  /// spec (σz or ρ just inside it, a ray grazing past a neighbour) often fails on the fine surface. In free
+  /// space that edge is what the view-minimal cover keeps (docs/quality.md: m_v of the reachable area 0.982
+  /// on knot1 and couplingdown, 0.989 on rotor without it). On a cell the plate and the axes limit m_v instead
+  /// and the closed loop takes the rest: the same margin there cost 5-25 % more views for no m_v.
+  Countermeasures free_space_countermeasures;
   std::uint64_t seed = 1;
   /// Keep every evaluated candidate in the plan (ViewPlan::candidate_views), for benchmarks and diagnostics.
   bool keep_candidates = false;

@@ -97,6 +97,15 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     if (!cell_in) throw ConfigError("matrix.countermeasures: auto needs a cell (--cell) for its pose-error model");
     settings.matrix.countermeasures = countermeasures_for(sensor, cell_in->pose_error, settings.viewpoints.standoff_factor);
   }
+  if (!cell_in && settings.free_space_countermeasures.any()) {
+    // Free space: the margin against the rough model's own error (config.hpp), the larger of each.
+    Countermeasures& cm = settings.matrix.countermeasures;
+    const Countermeasures& f = settings.free_space_countermeasures;
+    cm.frustum_detune = std::max(cm.frustum_detune, f.frustum_detune);
+    cm.dof_margin_mm = std::max(cm.dof_margin_mm, f.dof_margin_mm);
+    cm.compliance_buffer = std::max(cm.compliance_buffer, f.compliance_buffer);
+    cm.visibility_margin_mm = std::max(cm.visibility_margin_mm, f.visibility_margin_mm);
+  }
   if (cell_in) {
     // The object rests on the plate in the cell's configured orientation (object_rpy_rad, or the resting pose
     // a placement choice put there): its rotated bounding box centred on the turntable axis, its lowest point
@@ -501,7 +510,8 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
                                                   {"dof_margin_mm", cm.dof_margin_mm},
                                                   {"compliance_buffer", cm.compliance_buffer},
                                                   {"visibility_margin_mm", cm.visibility_margin_mm},
-                                                  {"from_cell_pose_error", p.settings.countermeasures_from_cell}};
+                                                  {"from_cell_pose_error", p.settings.countermeasures_from_cell},
+                                                  {"free_space_margin_applied", !p.cell && p.settings.free_space_countermeasures.any()}};
   }
   if (p.cell) {
     const auto& c = *p.cell;

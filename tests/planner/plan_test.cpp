@@ -14,6 +14,8 @@
 
 #include "common/errors.hpp"
 #include "planner/plan.hpp"
+#include "planner/config.hpp"
+#include "planner/kinematics/cell.hpp"
 #include "planner/geometry/scene.hpp"
 #include "planner/sim/virtual_scanner.hpp"
 #include "test_meshes.hpp"
@@ -92,6 +94,47 @@ TEST(Plan, ACancelRequestStopsPlanningAndNamesTheStage) {
   } catch (const PlanCancelled& e) {
     EXPECT_THAT(e.what(), HasSubstr("planning stopped by request after the rough model"));
   }
+}
+
+// matrix.free_space_countermeasures: the shipped margin, applied to plans without a cell and only to them.
+TEST(Plan, TheFreeSpaceMarginTightensTheMatrixWithoutACellOnly) {
+  const PlannerSettings shipped = load_planner_settings(testing::source_path("config/planner/default.yaml"));
+  EXPECT_DOUBLE_EQ(shipped.free_space_countermeasures.compliance_buffer, 0.1);
+  EXPECT_DOUBLE_EQ(shipped.free_space_countermeasures.visibility_margin_mm, 1.0);
+  PlannerSettings none = shipped, margin = shipped;
+  none.free_space_countermeasures = {};
+  RoughModelOptions o;
+  o.target_vertices = 600;
+  const TriangleMesh m = mushroom_mm();
+  const ViewPlan a = plan_views(m, testing::thesis_sensor(), testing::thesis_spec(), none, o, 2);
+  const ViewPlan b = plan_views(m, testing::thesis_sensor(), testing::thesis_spec(), margin, o, 2);
+  EXPECT_DOUBLE_EQ(a.settings.matrix.countermeasures.compliance_buffer, 0.0);
+  EXPECT_DOUBLE_EQ(b.settings.matrix.countermeasures.compliance_buffer, 0.1);
+  EXPECT_DOUBLE_EQ(b.settings.matrix.countermeasures.visibility_margin_mm, 1.0);
+  EXPECT_TRUE(plan_to_json(b)["settings"]["matrix"]["countermeasures"]["free_space_margin_applied"].get<bool>());
+  // The same candidates meet the tightened spec less often: σz ≤ spec/1.1 and ρ ≥ 1.1·spec cut pairs that
+  // passed at the spec itself.
+  ASSERT_GT(a.matrix_stats.pairs_total, 0u);
+  const double share_a = double(a.matrix_stats.pairs_compliant) / double(a.matrix_stats.pairs_total);
+  const double share_b = double(b.matrix_stats.pairs_compliant) / double(b.matrix_stats.pairs_total);
+  EXPECT_LT(share_b, 0.99 * share_a);
+  // On a cell the margin is not applied: the same plan as without it.
+  const CellModel cell = load_cell(testing::source_path("config/cells/turntable-lift-tilt.yaml"));
+  const ViewPlan c = plan_views(m, testing::thesis_sensor(), testing::thesis_spec(), none, o, 2, &cell);
+  const ViewPlan d = plan_views(m, testing::thesis_sensor(), testing::thesis_spec(), margin, o, 2, &cell);
+  EXPECT_DOUBLE_EQ(d.settings.matrix.countermeasures.compliance_buffer, 0.0);
+  EXPECT_EQ(c.views.size(), d.views.size());
+  EXPECT_EQ(c.matrix_stats.pairs_measurable, d.matrix_stats.pairs_measurable);
+  // A negative margin is refused with its key path.
+  const fs::path bad = fs::temp_directory_path() / "scancell_free_space_margin.yaml";
+  std::ofstream(bad) << "matrix:\n  free_space_countermeasures:\n    compliance_buffer: -0.1\n";
+  try {
+    load_planner_settings(bad);
+    ADD_FAILURE() << "accepted a negative compliance_buffer";
+  } catch (const ConfigError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("matrix.free_space_countermeasures.compliance_buffer"));
+  }
+  fs::remove(bad);
 }
 
 TEST(Plan, MushroomIsCoveredWithAConnectedRegistrationGraph) {
