@@ -5,7 +5,7 @@ JOBS       ?= $(shell nproc)
 CMAKE      ?= cmake
 SCANCELL    = $(BUILD)/tools/scancell
 
-.PHONY: all deps build test test-asan fuzz demo demo-rough demo-offline kill-test bench quality quality-cell clean
+.PHONY: all deps build test test-asan fuzz demo demo-rough demo-offline kill-test bench quality quality-cell monitor monitor-check clean
 
 all: build
 
@@ -73,6 +73,16 @@ demo-offline: build
 	$(SCANCELL) verify --plan $(BUILD)/demo-plan.json --report $(BUILD)/demo-verification.json \
 	  --coverage-ply $(BUILD)/demo-coverage.ply --png $(BUILD)/demo-coverage.png
 	@echo "plan: $(BUILD)/demo-plan.json  verification: $(BUILD)/demo-verification.json  coverage: $(BUILD)/demo-coverage.{ply,png}"
+
+# lcm-spy decoding scancell's channels (installs liblcm-java, libjchart2d-java and a headless JDK first):
+# make monitor [LCM_URL=udpm://239.255.76.67:7667?ttl=0]. monitor-check is its headless test: a running
+# scancelld's SCANCELL_STATUS recorded by lcm-logger and decoded through the same jar as lcm-spy.
+LCM_URL ?= udpm://239.255.76.67:7667?ttl=0
+monitor: build
+	scripts/monitor.sh $(BUILD) spy '$(LCM_URL)'
+
+monitor-check: build
+	scripts/monitor.sh $(BUILD) check
 
 bench: build
 	$(BUILD)/bench/bench_planner
