@@ -37,7 +37,10 @@ ModelSummary write_job_model(const CloudSummary& cloud, const planner::ModelSpec
 /// `file` (jobs/<id>/report.json, issue 19): the inspection report. The signed deviation of the cloud's
 /// samples and the model's vertices from `reference` (planner::signed_deviation: mean, RMS, 95th percentile
 /// and maximum of |d|, share within 3 × the precision spec), with the spec, the reference named and
-/// `coverage` (the result's coverage figures) copied in. Written durably; returns the report.
+/// `coverage` (the result's coverage figures) copied in. Beside it `deviation.png` (gnuplot): the cloud
+/// coloured by signed deviation with its colour bar, titled with the job, reference, date, spec and figures;
+/// the report names it (`deviation_png`) or says why it is missing (`deviation_png_error`). Written
+/// durably; returns the report.
 nlohmann::json write_job_report(const std::filesystem::path& file, std::int64_t job, const planner::ModelSpec& spec,
                                 const planner::TriangleMesh& reference, const std::string& reference_name,
                                 const std::string& reference_kind, const CloudSummary& cloud, const ModelSummary& model,

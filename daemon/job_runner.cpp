@@ -261,6 +261,8 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
       result["report"] = file.string();
       result["cloud_deviation_rms_mm"] = r["cloud"]["rms_mm"];
       result["model_deviation_p95_mm"] = r["model"]["p95_abs_mm"];
+      if (r.contains("deviation_png")) result["deviation_png"] = r["deviation_png"];
+      if (r.contains("deviation_png_error")) result["deviation_png_error"] = r["deviation_png_error"];
     } catch (const std::exception& e) {
       result["report_error"] = e.what();
     }

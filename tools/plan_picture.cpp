@@ -1,7 +1,5 @@
 #include "tools/plan_picture.hpp"
-
-#include <sys/wait.h>
-#include <unistd.h>
+#include "common/gnuplot.hpp"
 
 #include <cstdio>
 #include <cstdlib>
@@ -12,35 +10,10 @@
 
 namespace scancell::tools {
 
-namespace {
-
 namespace fs = std::filesystem;
 
-/// A scratch directory removed on every way out.
-struct ScratchDir {
-  fs::path path;
-  ScratchDir() {
-    char tmpl[] = "/tmp/scancell-plan-png-XXXXXX";
-    if (!::mkdtemp(tmpl)) throw std::runtime_error("--png: cannot create a temporary directory");
-    path = tmpl;
-  }
-  ~ScratchDir() {
-    std::error_code ec;
-    fs::remove_all(path, ec);
-  }
-};
-
-/// gnuplot's single-quoted string: a quote is doubled.
-std::string quoted(const std::string& s) {
-  std::string out = "'";
-  for (const char c : s) out += c == '\'' ? std::string("''") : std::string(1, c);
-  return out + "'";
-}
-
-}  // namespace
-
 void write_plan_png(const planner::ViewPlan& plan, const std::string& name, const fs::path& png) {
-  const ScratchDir dir;
+  const ScratchDir dir("scancell-plan-png");
   std::vector<std::uint8_t> predicted(plan.rough.size(), 0);
   for (const auto r : plan.predicted_rows)
     if (r < predicted.size()) predicted[r] = 1;
@@ -74,12 +47,9 @@ void write_plan_png(const planner::ViewPlan& plan, const std::string& name, cons
                 name.c_str(), plan.views.size(), area_in, plan.rough.total_area_mm2,
                 plan.rough.total_area_mm2 > 0 ? 100.0 * area_in / plan.rough.total_area_mm2 : 0.0, plan.spec.precision_mm,
                 plan.spec.density_per_mm2);
-  const fs::path tmp = png.string() + ".tmp";
-  const auto d = [&](const char* f) { return quoted((dir.path / f).string()); };
+  const auto d = [&](const char* f) { return gnuplot_quoted((dir.path / f).string()); };
   std::ostringstream s;
-  s << "set terminal pngcairo size 1600,820 font 'sans,10'\n"
-    << "set output " << quoted(tmp.string()) << "\n"
-    << "set multiplot layout 1,2 title " << quoted(title) << " font ',12'\n"
+  s << "set multiplot layout 1,2 title " << gnuplot_text(title) << " font ',12' noenhanced\n"
     << "set xlabel 'x (mm)'\nset ylabel 'y (mm)'\nset zlabel 'z (mm)' rotate parallel\nset view equal xyz\n"
     << "set key bottom center horizontal samplen 2 font ',9'\nset ticslevel 0\n"
     << "plot_it = \"splot " << d("in.dat") << " w p pt 7 ps 0.25 lc rgb '#3b7dd8' t 'rows predicted measured (" << n_in << ")', "
@@ -90,19 +60,7 @@ void write_plan_png(const planner::ViewPlan& plan, const std::string& name, cons
     << "set title 'perspective'\nset view 62,32\neval plot_it\n"
     << "set title 'from above (+z)'\nset view 0,0\nunset zlabel\nunset ztics\neval plot_it\n"
     << "unset multiplot\n";
-  FILE* gp = ::popen("gnuplot 2>&1", "w");
-  if (!gp) throw std::runtime_error("--png: cannot start gnuplot");
-  const std::string script = s.str();
-  std::fwrite(script.data(), 1, script.size(), gp);
-  const int st = ::pclose(gp);
-  if (!WIFEXITED(st) || WEXITSTATUS(st) == 127)
-    throw std::runtime_error("--png needs gnuplot on the PATH (Debian: gnuplot-nox; scripts/deps.sh installs it)");
-  std::error_code ec;
-  if (WEXITSTATUS(st) != 0 || !fs::exists(tmp, ec) || fs::file_size(tmp, ec) == 0) {
-    fs::remove(tmp, ec);
-    throw std::runtime_error("--png: gnuplot failed (exit " + std::to_string(WEXITSTATUS(st)) + ") drawing " + png.string());
-  }
-  fs::rename(tmp, png);
+  run_gnuplot("pngcairo size 1600,820 font 'sans,10'", s.str(), png, "--png");
 }
 
 }  // namespace scancell::tools

@@ -82,7 +82,10 @@ struct SimCell : ::testing::Test {
     bring_up(*io, models.cell, 10000ms);
     journal = std::make_unique<Journal>(dir / "data");
   }
-  void TearDown() override { fs::remove_all(dir); }
+  void TearDown() override {
+    if (const char* keep = std::getenv("SCANCELL_KEEP_TEST_DIR"); keep && *keep) std::cout << "kept " << dir << "\n";
+    else fs::remove_all(dir);
+  }
 
   std::optional<SimTruth> truth;
   bool register_views = true;
@@ -331,6 +334,19 @@ TEST_F(SimCell, CubeJobMeasuresEverythingTheCellCanMeasure) {
     EXPECT_LT(std::abs(report["model"]["mean_mm"].get<double>()), 0.03) << report.dump();
     EXPECT_LT(report["model"]["p95_abs_mm"].get<double>(), 0.1) << report.dump();
     EXPECT_EQ(report["cloud"]["points"].get<std::size_t>(), result["cloud_points"].get<std::size_t>());
+    // Its picture: a whole PNG of 1600 x 820 beside it, named by the report and the result.
+    ASSERT_TRUE(report.contains("deviation_png")) << report.dump();
+    EXPECT_EQ(result["deviation_png"], report["deviation_png"]);
+    std::ifstream png(report["deviation_png"].get<std::string>(), std::ios::binary);
+    std::string head(24, '\0');
+    ASSERT_TRUE(png.read(head.data(), 24));
+    EXPECT_EQ(head.substr(1, 3), "PNG");
+    auto be32 = [&](int at) { return (std::uint32_t(std::uint8_t(head[at])) << 24) | (std::uint32_t(std::uint8_t(head[at + 1])) << 16) |
+                                     (std::uint32_t(std::uint8_t(head[at + 2])) << 8) | std::uint32_t(std::uint8_t(head[at + 3])); };
+    EXPECT_EQ(be32(16), 1600u);
+    EXPECT_EQ(be32(20), 820u);
+    EXPECT_GT(fs::file_size(report["deviation_png"].get<std::string>()), 40000u);
+    EXPECT_FALSE(fs::exists(report["deviation_png"].get<std::string>() + ".tmp"));
     std::cout << "report: cloud " << report["cloud"].dump() << "\nmodel " << report["model"].dump() << "\n";
   }
   // The lifecycle in order, journalled.
