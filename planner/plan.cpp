@@ -97,7 +97,8 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     if (!cell_in) throw ConfigError("matrix.countermeasures: auto needs a cell (--cell) for its pose-error model");
     settings.matrix.countermeasures = countermeasures_for(sensor, cell_in->pose_error, settings.viewpoints.standoff_factor);
   }
-  if (!cell_in && settings.free_space_countermeasures.any()) {
+  const bool margin_applied = !cell_in && settings.free_space_countermeasures.any();
+  if (margin_applied) {
     // Free space: the margin against the rough model's own error (config.hpp), the larger of each.
     Countermeasures& cm = settings.matrix.countermeasures;
     const Countermeasures& f = settings.free_space_countermeasures;
@@ -248,6 +249,30 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
 
     t = Clock::now();
     auto matrix = build_measurability(p.rough, scene, sensor, spec, candidates, settings.matrix, &p.matrix_stats, cancel);
+    if (margin_applied) {
+      // The margin chooses among the views that can measure a row; it does not give up a row only views at
+      // the edge of the spec reach (a bore's wall, seen only at grazing incidence): such rows keep the
+      // elements the plain test gives them.
+      const std::vector<std::uint32_t> lost = matrix.unmeasurable_rows();
+      if (!lost.empty()) {
+        std::vector<std::uint8_t> is_lost(p.rough.size(), 0);
+        for (auto r : lost) is_lost[r] = 1;
+        const MeasurabilityMatrix plain =
+            build_measurability(p.rough, scene, sensor, spec, candidates, settings_in.matrix, nullptr, cancel);
+        std::vector<std::uint8_t> gained(p.rough.size(), 0);
+        for (std::size_t j = 0; j < matrix.columns.size(); ++j) {
+          std::vector<std::uint32_t> rows = matrix.columns[j].rows();
+          const std::size_t before = rows.size();
+          plain.columns[j].for_each([&](std::uint32_t r) {
+            if (is_lost[r]) rows.push_back(r), gained[r] = 1;
+          });
+          if (rows.size() == before) continue;
+          std::sort(rows.begin(), rows.end());
+          matrix.columns[j] = MeasurabilityColumn(std::move(rows), matrix.n_rows);
+        }
+        p.generation.rows_without_margin = static_cast<std::size_t>(std::count(gained.begin(), gained.end(), 1));
+      }
+    }
     strip_measured(matrix);
     // Rows nothing measures: add open-direction views for them (deep holes, undercuts) and their columns.
     auto unmeasurable = matrix.unmeasurable_rows();
@@ -473,6 +498,7 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
       {"segments", p.segments},
       {"single_best_view_candidates", p.generation.single_best_views},
       {"rows_unmeasurable_by_first_candidates", p.generation.rows_unmeasurable_before},
+      {"rows_measured_without_the_free_space_margin", p.generation.rows_without_margin},
       {"open_direction_rows", p.generation.open_direction_rows},
       {"open_direction_candidates", p.generation.open_direction_candidates},
       {"candidates_dropped_inside", p.generation.dropped_inside},

@@ -84,6 +84,7 @@ struct GenerationReport {
   std::size_t open_direction_rows = 0;        // unmeasurable rows targeted by open-direction views
   std::size_t open_direction_candidates = 0;  // candidates added for them
   std::size_t rows_unmeasurable_before = 0;   // rows no candidate measured before they were added
+  std::size_t rows_without_margin = 0;        // free space: rows only the plain test (no margin) lets a view measure
 };
 
 /// Longest scan length within the sensor's range whose eq. 3.8 density still meets the spec at the given
