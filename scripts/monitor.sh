@@ -53,15 +53,8 @@ check)
   W=$(mktemp -d /tmp/scancell_monitor.XXXXXX)
   PORT=$((18700 + ($$ % 400) * 8))
   LCM_PORT=$((7900 + $$ % 50))
-  cleanup() {
-    [ -n "${DAEMON_PID:-}" ] && kill -9 "$DAEMON_PID" 2>/dev/null
-    [ -n "${SIM_PID:-}" ] && kill -TERM "$SIM_PID" 2>/dev/null
-    [ -n "${LOGGER_PID:-}" ] && kill -TERM "$LOGGER_PID" 2>/dev/null
-    wait 2>/dev/null
-    rm -rf "$W"
-  }
-  trap cleanup EXIT
   . "$SRC/tests/daemon/sim_cell.sh"
+  trap stop_cell EXIT
   write_drivers
   write_config "{driver: sim}" "{max_rounds: 1}"
   start_sim

@@ -10,15 +10,8 @@ W=$(mktemp -d /tmp/scancell_cli.XXXXXX)
 PORT=$((17500 + ($$ % 400) * 8))
 LCM_PORT=$((7800 + $$ % 100))  # its own LCM port: other tests publish on the default one
 fail() { echo "FAIL: $*"; [ -f "$W/daemon.log" ] && tail -20 "$W/daemon.log"; exit 1; }
-cleanup() {
-  [ -n "${DAEMON_PID:-}" ] && kill -9 "$DAEMON_PID" 2>/dev/null
-  [ -n "${SIM_PID:-}" ] && kill -TERM "$SIM_PID" 2>/dev/null
-  [ -n "${LOGGER_PID:-}" ] && kill -TERM "$LOGGER_PID" 2>/dev/null
-  wait 2>/dev/null
-  rm -rf "$W"
-}
-trap cleanup EXIT
 . "$(dirname "$0")/sim_cell.sh"
+trap stop_cell EXIT
 write_drivers
 JOBS="{max_rounds: 2, move_timeout_s: 20, scan_speed_mm_s: 400, home_timeout_s: 20"
 

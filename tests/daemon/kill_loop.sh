@@ -19,15 +19,8 @@ PORT=$((17000 + ($$ % 500) * 8))
 SIM_PID=""
 LCM_PORT=$((7900 + $$ % 100))  # its own LCM port: other tests publish on the default one
 DAEMON_PID=""
-cleanup() {
-  [ -n "$DAEMON_PID" ] && kill -9 "$DAEMON_PID" 2>/dev/null || true
-  [ -n "$SIM_PID" ] && kill -TERM "$SIM_PID" 2>/dev/null || true
-  wait 2>/dev/null || true
-  rm -rf "$W"
-}
-trap cleanup EXIT
-
 . "$SRC/tests/daemon/sim_cell.sh"
+trap stop_cell EXIT
 write_drivers
 TRACE="$W/phase.trace"
 write_config "{driver: sim, seed: 3}" "{max_rounds: 3, move_timeout_s: 20, scan_speed_mm_s: 400, home_timeout_s: 20, phase_trace_file: $TRACE}"

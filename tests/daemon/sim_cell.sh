@@ -1,5 +1,14 @@
 # Shared by the process tests (sourced): the demo's driver config moved to five ports from $PORT, a daemon
-# config in $W, and the drive simulator. Needs BUILD, SRC, W, PORT, LCM_PORT.
+# config in $W, the drive simulator, and stop_cell for the EXIT trap. Needs BUILD, SRC, W, PORT, LCM_PORT.
+
+# stop_cell: kill what the test started (DAEMON_PID hard, SIM_PID and LOGGER_PID cleanly) and remove $W.
+stop_cell() {
+  [ -n "${DAEMON_PID:-}" ] && kill -9 "$DAEMON_PID" 2>/dev/null || true
+  [ -n "${SIM_PID:-}" ] && kill -TERM "$SIM_PID" 2>/dev/null || true
+  [ -n "${LOGGER_PID:-}" ] && kill -TERM "$LOGGER_PID" 2>/dev/null || true
+  wait 2>/dev/null || true
+  rm -rf "$W"
+}
 
 # write_drivers: config/drivers/demo-sim.yaml with its ports 15501-15505 moved to PORT ... PORT+4.
 write_drivers() {

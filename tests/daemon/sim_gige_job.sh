@@ -10,14 +10,8 @@ W=$(mktemp -d /tmp/scancell_gige.XXXXXX)
 PORT=$((18700 + ($$ % 300) * 8))
 LCM_PORT=$((7900 + $$ % 100))
 fail() { echo "FAIL: $*"; [ -f "$W/daemon.log" ] && tail -20 "$W/daemon.log"; exit 1; }
-cleanup() {
-  [ -n "${DAEMON_PID:-}" ] && kill -9 "$DAEMON_PID" 2>/dev/null
-  [ -n "${SIM_PID:-}" ] && kill -TERM "$SIM_PID" 2>/dev/null
-  wait 2>/dev/null
-  rm -rf "$W"
-}
-trap cleanup EXIT
 . "$(dirname "$0")/sim_cell.sh"
+trap stop_cell EXIT
 write_drivers
 write_config "{driver: sim_gige, device: 127.0.0.1, profiles_per_frame: 16}" \
   "{max_rounds: 1, move_timeout_s: 20, scan_speed_mm_s: 100, home_timeout_s: 20}"
