@@ -232,6 +232,22 @@ struct LossyHead : ScanHead, drivers::Scanner {
 // sweep's last frame lost: the scanner goes quiet, acquire_view's wait times out and keeps what came): the
 // sweep axis returns and sweeps again firing only at the rows left without a profile, and they land where they belong (between their neighbours in
 // the view frame, on the row-index line of the first pass). With fill_sweeps 0 the holes stay and are counted.
+/// A whole PNG of this size: the signature, the IHDR width and height, drawn (over `min_bytes`), no .tmp left.
+void expect_whole_png(const std::string& file, std::uint32_t width, std::uint32_t height, std::uintmax_t min_bytes) {
+  std::ifstream png(file, std::ios::binary);
+  std::string head(24, '\0');
+  ASSERT_TRUE(png.read(head.data(), 24)) << file;
+  EXPECT_EQ(head.substr(1, 3), "PNG") << file;
+  auto be32 = [&](int at) {
+    return (std::uint32_t(std::uint8_t(head[at])) << 24) | (std::uint32_t(std::uint8_t(head[at + 1])) << 16) |
+           (std::uint32_t(std::uint8_t(head[at + 2])) << 8) | std::uint32_t(std::uint8_t(head[at + 3]));
+  };
+  EXPECT_EQ(be32(16), width) << file;
+  EXPECT_EQ(be32(20), height) << file;
+  EXPECT_GT(fs::file_size(file), min_bytes) << file;
+  EXPECT_FALSE(fs::exists(file + ".tmp")) << file;
+}
+
 TEST_F(SimCell, FillSweepsTakeTheProfilesASweepMissedAndOnlyThose) {
   sp::TriangleMesh cube = sp::load_mesh(write_cube(dir));
   for (auto& v : cube.vertices) v -= Eigen::Vector3d(25, 25, 0);
@@ -309,7 +325,9 @@ TEST_F(SimCell, CubeJobMeasuresEverythingTheCellCanMeasure) {
   if (end == JobState::done) {
     EXPECT_EQ(result["open_rows"].get<int>(), 0);
   }
-  EXPECT_TRUE(fs::exists(result["coverage_png"].get<std::string>()));
+  // The coverage picture: the six views labelled, with a legend and the headline numbers (gnuplot).
+  EXPECT_FALSE(result.contains("coverage_png_error")) << result.dump();
+  expect_whole_png(result["coverage_png"].get<std::string>(), 1240, 860, 15000);  // flat faces compress well
   // Issue 20, first part: the base is what is left, so the second setup is any other face down (a cube rests
   // on each alike), predicted to measure most of the base's 2500 mm², with a picture of it turned so.
   ASSERT_TRUE(result.contains("next_setup")) << result.dump();
@@ -337,16 +355,7 @@ TEST_F(SimCell, CubeJobMeasuresEverythingTheCellCanMeasure) {
     // Its picture: a whole PNG of 1600 x 820 beside it, named by the report and the result.
     ASSERT_TRUE(report.contains("deviation_png")) << report.dump();
     EXPECT_EQ(result["deviation_png"], report["deviation_png"]);
-    std::ifstream png(report["deviation_png"].get<std::string>(), std::ios::binary);
-    std::string head(24, '\0');
-    ASSERT_TRUE(png.read(head.data(), 24));
-    EXPECT_EQ(head.substr(1, 3), "PNG");
-    auto be32 = [&](int at) { return (std::uint32_t(std::uint8_t(head[at])) << 24) | (std::uint32_t(std::uint8_t(head[at + 1])) << 16) |
-                                     (std::uint32_t(std::uint8_t(head[at + 2])) << 8) | std::uint32_t(std::uint8_t(head[at + 3])); };
-    EXPECT_EQ(be32(16), 1600u);
-    EXPECT_EQ(be32(20), 820u);
-    EXPECT_GT(fs::file_size(report["deviation_png"].get<std::string>()), 40000u);
-    EXPECT_FALSE(fs::exists(report["deviation_png"].get<std::string>() + ".tmp"));
+    expect_whole_png(report["deviation_png"].get<std::string>(), 1600, 820, 40000);
     std::cout << "report: cloud " << report["cloud"].dump() << "\nmodel " << report["model"].dump() << "\n";
   }
   // The lifecycle in order, journalled.
