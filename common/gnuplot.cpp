@@ -1,8 +1,10 @@
 #include "common/gnuplot.hpp"
 
+#include <pthread.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <csignal>
 #include <cstdio>
 #include <stdexcept>
 #include <vector>
@@ -45,10 +47,27 @@ void run_gnuplot(const std::string& terminal, const std::string& script, const f
   const fs::path tmp = png.string() + ".tmp";
   const std::string full =
       "set terminal " + terminal + "\nset output " + gnuplot_quoted(tmp.string()) + "\n" + script + "\nunset output\n";
+  // A gnuplot that is missing or dies early closes the pipe: the write must fail with EPIPE, not raise
+  // SIGPIPE and end the process (a daemon drawing a job's pictures). SIGPIPE is blocked on this thread while
+  // writing, and one it raised is taken off the thread's pending set before the mask is restored.
+  sigset_t pipe_only, old_mask;
+  sigemptyset(&pipe_only);
+  sigaddset(&pipe_only, SIGPIPE);
+  pthread_sigmask(SIG_BLOCK, &pipe_only, &old_mask);
   FILE* gp = ::popen("gnuplot 2>&1", "w");
-  if (!gp) throw std::runtime_error(what + ": cannot start gnuplot");
+  if (!gp) {
+    pthread_sigmask(SIG_SETMASK, &old_mask, nullptr);
+    throw std::runtime_error(what + ": cannot start gnuplot");
+  }
   std::fwrite(full.data(), 1, full.size(), gp);
   const int st = ::pclose(gp);
+  sigset_t pending;
+  sigpending(&pending);
+  if (sigismember(&pending, SIGPIPE)) {
+    const timespec zero{0, 0};
+    sigtimedwait(&pipe_only, nullptr, &zero);
+  }
+  pthread_sigmask(SIG_SETMASK, &old_mask, nullptr);
   if (!WIFEXITED(st) || WEXITSTATUS(st) == 127)
     throw std::runtime_error(what + " needs gnuplot on the PATH (Debian: gnuplot-nox; scripts/deps.sh installs it)");
   std::error_code ec;
