@@ -46,6 +46,7 @@ struct ViewPlan {
   RoughModelReport rough_report;
   RoughModel rough;
   GenerationReport generation;
+  bool free_space_margin_applied = false;  // matrix.free_space_countermeasures merged in (no cell, derived rough model)
   MatrixStats matrix_stats;
   std::size_t candidates = 0;
   std::size_t segments = 0;  // labelled surface patches of the rough model

@@ -60,10 +60,7 @@ check)
   start_sim
   lcm-logger --lcm-url="udpm://239.255.76.67:$LCM_PORT?ttl=0" -q "$W/cell.lcmlog" &
   LOGGER_PID=$!
-  "$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" > "$W/daemon.log" 2>&1 &
-  DAEMON_PID=$!
-  for _ in $(seq 400); do [ -S "$W/control.sock" ] && break; sleep 0.025; done
-  [ -S "$W/control.sock" ] || { echo "monitor check: scancelld did not start:"; cat "$W/daemon.log"; exit 1; }
+  start_daemon || { echo "monitor check: scancelld did not start"; exit 1; }
   sleep 2.5  # SCANCELL_STATUS goes out at 1 Hz
   kill -TERM "$DAEMON_PID"; wait "$DAEMON_PID" 2>/dev/null || true; DAEMON_PID=""
   sleep 0.2

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <stdexcept>
 
 #include <tbb/parallel_for.h>
 
@@ -51,25 +52,51 @@ bool sphere_may_touch_frustum(const SensorModel& s, const FrustumTerms& f, doubl
   return std::abs(c.y()) - r <= half_y;
 }
 
-/// The occlusion rays of a pair: from just off the surface to the laser source and to the receiver, and with a
-/// near-miss margin m also to both displaced by ±m along camera x and y (10 rays instead of 2).
-void pair_rays(const Eigen::Vector3d& s, const Eigen::Vector3d& n, const Viewpoint& v, const Eigen::Matrix3d& r,
-               const PointTest& t, double eps, double margin, OcclusionRay* out) {
+/// The occlusion rays of a pair: from just off the surface to the laser source and to the receiver (2 rays), or
+/// with a near-miss margin m > 0 the 8 rays to both displaced by ±m along camera x and y (the margin's extra
+/// rays: the caller casts the 2 undisplaced ones first and these only for pairs those leave clear).
+std::size_t pair_rays(const Eigen::Vector3d& s, const Eigen::Vector3d& n, const Viewpoint& v, const Eigen::Matrix3d& r,
+                      const PointTest& t, double eps, double margin, OcclusionRay* out) {
   const Eigen::Vector3d origin = s + eps * n;
   const Eigen::Vector3d yc = r.col(1), xc = r.col(0);
   const Eigen::Vector3d ends[2] = {v.position + t.laser_y_mm * yc, v.position + t.receiver_y_mm * yc};
-  const Eigen::Vector3d shifts[5] = {Eigen::Vector3d::Zero(), margin * xc, -margin * xc, margin * yc, -margin * yc};
-  const int n_shift = margin > 0.0 ? 5 : 1;
-  int k = 0;
+  const Eigen::Vector3d centre[1] = {Eigen::Vector3d::Zero()};
+  const Eigen::Vector3d shifts[4] = {margin * xc, -margin * xc, margin * yc, -margin * yc};
+  const Eigen::Vector3d* offsets = margin > 0.0 ? shifts : centre;
+  const int n_offsets = margin > 0.0 ? 4 : 1;
+  std::size_t k = 0;
   for (const auto& end : ends)
-    for (int q = 0; q < n_shift; ++q, ++k) {
-      const Eigen::Vector3d d = end + shifts[q] - origin;
+    for (int q = 0; q < n_offsets; ++q, ++k) {
+      const Eigen::Vector3d d = end + offsets[q] - origin;
       out[k].origin = origin.cast<float>();
       out[k].dir = d.cast<float>();
       out[k].t_near = 0.0f;
       out[k].t_far = static_cast<float>(1.0 - eps / std::max(d.norm(), eps * 2.0));
     }
+  return k;
 }
+
+/// One level of the element test: the sensor and specification a (possibly detuned, thesis 7.4.7) test uses.
+/// The density formula keeps the real Φx (the sample spacing does not change); only the frustum test uses the
+/// narrowed width, and the sweep is shortened for the frustum but not for the density.
+struct TestLevel {
+  SensorModel sensor;
+  ModelSpec spec;
+  FrustumTerms terms;
+  double length_factor;
+  double margin_mm;
+  TestLevel(const SensorModel& s, const ModelSpec& sp, const Countermeasures& cm)
+      : sensor(detuned_sensor(s, cm)), spec(detuned_spec(sp, cm)), terms(s), length_factor(1.0 - cm.frustum_detune),
+        margin_mm(cm.visibility_margin_mm) {
+    terms.tan_half_x *= length_factor;
+    terms.tan_half_y *= length_factor;
+  }
+  PointTest test(double scan_length_mm, const Eigen::Vector3d& pc, const Eigen::Vector3d& nc) const {
+    PointTest t = test_point(sensor, terms, spec, scan_length_mm * length_factor, pc, nc);
+    if (t.compliant && length_factor < 1.0) t.compliant = test_point(sensor, terms, spec, scan_length_mm, pc, nc).compliant;
+    return t;
+  }
+};
 
 struct Counters {
   std::atomic<std::uint64_t> block_culled{0}, in_frustum{0}, surviving{0}, compliant{0}, rays{0}, measurable{0};
@@ -151,87 +178,132 @@ std::vector<std::uint32_t> MeasurabilityMatrix::unmeasurable_rows() const {
   return out;
 }
 
-MeasurabilityMatrix build_measurability(const RoughModel& rough, const OcclusionScene& scene, const SensorModel& sensor_in,
-                                        const ModelSpec& spec_in, const std::vector<Viewpoint>& candidates,
-                                        const MatrixSettings& settings, MatrixStats* stats, const std::atomic<int>* cancel) {
+MeasurabilityMatrix build_measurability(const RoughModel& rough, const OcclusionScene& scene, const SensorModel& sensor,
+                                        const ModelSpec& spec, const std::vector<Viewpoint>& candidates,
+                                        const MatrixSettings& settings, MatrixStats* stats, const std::atomic<int>* cancel,
+                                        PlainElements* plain) {
   MeasurabilityMatrix m;
   m.n_rows = static_cast<std::uint32_t>(rough.size());
   m.columns.resize(candidates.size());
   const auto blocks = make_blocks(rough);
   const double eps = ray_offset(rough, settings);
-  const Countermeasures& cm = settings.countermeasures;
-  // Detuned tests (thesis 7.4.7): the density formula keeps the real Φx (the sample spacing does not change),
-  // only the frustum test uses the narrowed width.
-  const SensorModel tested = detuned_sensor(sensor_in, cm);
-  const ModelSpec spec = detuned_spec(spec_in, cm);
-  const SensorModel& sensor = tested;
-  FrustumTerms terms(sensor_in);
-  terms.tan_half_x *= 1.0 - cm.frustum_detune;
-  terms.tan_half_y *= 1.0 - cm.frustum_detune;
-  const double length_factor = 1.0 - cm.frustum_detune;
-  const std::size_t per_pair = cm.visibility_margin_mm > 0.0 ? 10 : 2;
+  // Two levels of the same test: `tight` makes the matrix; `wide` is the plain one whose elements the caller
+  // also wants, or (without) the tight one with its undisplaced rays only. Every level's countermeasures are
+  // at least the wide one's, so a tight element is always a wide one: blocks are culled and rays cast at the
+  // wide level first, and the near-miss rays (4x as many) only for the pairs the undisplaced rays leave clear.
+  const TestLevel tight(sensor, spec, settings.countermeasures);
+  Countermeasures wide_cm = plain ? plain->countermeasures : settings.countermeasures;
+  if (!plain) wide_cm.visibility_margin_mm = 0.0;
+  const TestLevel wide(sensor, spec, wide_cm);
+  const bool same_test = !plain;
+  const bool tight_extra_rays = tight.margin_mm > 0.0 && tight.margin_mm != wide.margin_mm;
+  if (plain) {
+    const Countermeasures& t = settings.countermeasures;
+    if (wide_cm.frustum_detune > t.frustum_detune || wide_cm.dof_margin_mm > t.dof_margin_mm ||
+        wide_cm.compliance_buffer > t.compliance_buffer || wide_cm.visibility_margin_mm > t.visibility_margin_mm)
+      throw std::invalid_argument("build_measurability: the plain test's countermeasures exceed the matrix's");
+    plain->matrix = MeasurabilityMatrix{};
+    plain->matrix.n_rows = m.n_rows;
+    plain->matrix.columns.resize(candidates.size());
+  }
+  const std::size_t wide_rays = wide.margin_mm > 0.0 ? 10 : 2;
   Counters cnt;
 
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, candidates.size(), 4), [&](const auto& range) {
-    std::vector<std::uint32_t> pending_rows;
-    std::vector<OcclusionRay> rays;
-    std::vector<std::uint8_t> occ(per_pair * kPairsPerFlush);
-    std::vector<std::uint32_t> column;
-    pending_rows.reserve(kPairsPerFlush);
-    rays.reserve(per_pair * kPairsPerFlush);
+    struct Pending {
+      std::uint32_t row;
+      bool tight;  // the tight test is compliant too
+      PointTest test;
+    };
+    std::vector<Pending> pending;
+    std::vector<OcclusionRay> rays, extra_rays;
+    std::vector<std::uint8_t> occ(wide_rays * kPairsPerFlush), extra_occ(8 * kPairsPerFlush);
+    std::vector<std::uint32_t> column, plain_column, extra_rows;
+    pending.reserve(kPairsPerFlush);
+    rays.reserve(wide_rays * kPairsPerFlush);
+    extra_rays.reserve(8 * kPairsPerFlush);
+    std::uint64_t rays_cast = 0;
     for (std::size_t j = range.begin(); j != range.end(); ++j) {
       if (cancel && cancel->load(std::memory_order_relaxed) != 0) return;  // the caller stops planning
       const Viewpoint& v = candidates[j];
       const Eigen::Matrix3d r = v.rotation();
       const Eigen::Matrix3d rt = r.transpose();
-      const double scan_length = v.scan_length_mm * length_factor;
-      std::uint64_t culled = 0, in_frustum = 0, surviving = 0, compliant = 0, measured = 0;
+      std::uint64_t culled = 0, in_frustum = 0, surviving = 0, compliant = 0;
       column.clear();
+      plain_column.clear();
       auto flush = [&] {
-        if (pending_rows.empty()) return;
+        if (pending.empty()) return;
         scene.occluded(rays.data(), rays.size(), occ.data());
-        for (std::size_t p = 0; p < pending_rows.size(); ++p) {
+        rays_cast += rays.size();
+        extra_rays.clear();
+        extra_rows.clear();
+        for (std::size_t p = 0; p < pending.size(); ++p) {
           bool clear = true;
-          for (std::size_t q = 0; q < per_pair; ++q) clear &= !occ[per_pair * p + q];
-          if (clear) column.push_back(pending_rows[p]);
+          for (std::size_t q = 0; q < wide_rays; ++q) clear &= !occ[wide_rays * p + q];
+          if (!clear) continue;
+          const Pending& e = pending[p];
+          if (plain && !e.tight) plain_column.push_back(e.row);
+          if (!e.tight) continue;
+          if (!tight_extra_rays) {
+            column.push_back(e.row);
+            continue;
+          }
+          extra_rows.push_back(e.row);
+          extra_rays.resize(extra_rays.size() + 8);
+          pair_rays(rough.points[e.row], rough.normals[e.row], v, r, e.test, eps, tight.margin_mm,
+                    &extra_rays[extra_rays.size() - 8]);
         }
-        pending_rows.clear();
+        if (!extra_rows.empty()) {
+          scene.occluded(extra_rays.data(), extra_rays.size(), extra_occ.data());
+          rays_cast += extra_rays.size();
+          for (std::size_t p = 0; p < extra_rows.size(); ++p) {
+            bool clear = true;
+            for (std::size_t q = 0; q < 8; ++q) clear &= !extra_occ[8 * p + q];
+            if (clear)
+              column.push_back(extra_rows[p]);
+            else if (plain)
+              plain_column.push_back(extra_rows[p]);
+          }
+        }
+        pending.clear();
         rays.clear();
       };
       for (std::uint32_t b = 0; b < blocks.size(); ++b) {
         const std::uint32_t begin = b * kBlock, end = std::min<std::uint32_t>(begin + kBlock, m.n_rows);
-        if (!sphere_may_touch_frustum(sensor, terms, scan_length, rt * (blocks[b].centre - v.position), blocks[b].radius)) {
+        if (!sphere_may_touch_frustum(wide.sensor, wide.terms, v.scan_length_mm * wide.length_factor,
+                                      rt * (blocks[b].centre - v.position), blocks[b].radius)) {
           culled += end - begin;
           continue;
         }
         for (std::uint32_t i = begin; i < end; ++i) {
           const Eigen::Vector3d pc = rt * (rough.points[i] - v.position);
-          PointTest t = test_point(sensor, terms, spec, scan_length, pc, rt * rough.normals[i]);
-          if (t.compliant && length_factor < 1.0) {
-            // Density uses the real sweep length: detuning narrows where we trust the view, not its sampling.
-            const PointTest real = test_point(sensor, terms, spec, v.scan_length_mm, pc, rt * rough.normals[i]);
-            t.compliant = real.compliant;
-          }
+          const Eigen::Vector3d nc = rt * rough.normals[i];
+          const PointTest t = tight.test(v.scan_length_mm, pc, nc);
           in_frustum += t.in_frustum;
           surviving += t.facing;
-          if (!t.compliant) continue;
-          ++compliant;
-          pending_rows.push_back(i);
-          rays.resize(rays.size() + per_pair);
-          pair_rays(rough.points[i], rough.normals[i], v, r, t, eps, cm.visibility_margin_mm, &rays[rays.size() - per_pair]);
-          if (pending_rows.size() == kPairsPerFlush) flush();
+          compliant += t.compliant;
+          if (!t.compliant && (same_test || !wide.test(v.scan_length_mm, pc, nc).compliant)) continue;
+          pending.push_back({i, t.compliant, t});
+          rays.resize(rays.size() + wide_rays);
+          OcclusionRay* out = &rays[rays.size() - wide_rays];
+          out += pair_rays(rough.points[i], rough.normals[i], v, r, t, eps, 0.0, out);
+          if (wide.margin_mm > 0.0) pair_rays(rough.points[i], rough.normals[i], v, r, t, eps, wide.margin_mm, out);
+          if (pending.size() == kPairsPerFlush) flush();
         }
       }
       flush();
-      measured = column.size();
       m.columns[j] = MeasurabilityColumn(column, m.n_rows);
+      if (plain) {  // (rows the near-miss rays failed joined after those of their flush: order them)
+        std::sort(plain_column.begin(), plain_column.end());
+        plain->matrix.columns[j] = MeasurabilityColumn(plain_column, m.n_rows);
+      }
       cnt.block_culled += culled;
       cnt.in_frustum += in_frustum;
       cnt.surviving += surviving;
       cnt.compliant += compliant;
-      cnt.rays += per_pair * compliant;
-      cnt.measurable += measured;
+      cnt.measurable += column.size();
     }
+    cnt.rays += rays_cast;
   });
   if (cancel && cancel->load() != 0)
     throw PlanCancelled("planning stopped by request while building the measurability matrix (" + std::to_string(candidates.size()) +
@@ -269,7 +341,7 @@ MeasurabilityMatrix build_measurability_naive(const RoughModel& rough, const Occ
             t.receiver_y_mm = t.laser_y_mm + sensor.baseline_mm;
           }
           tests[i - b] = t;
-          pair_rays(rough.points[i], rough.normals[i], v, r, t, eps, 0.0, &rays[2 * (i - b)]);
+          (void)pair_rays(rough.points[i], rough.normals[i], v, r, t, eps, 0.0, &rays[2 * (i - b)]);
         }
         scene.occluded(rays.data(), 2 * (e - b), occ.data());
         cnt.rays += 2 * (e - b);
@@ -291,7 +363,7 @@ bool measurable(const RoughModel& rough, const OcclusionScene& scene, const Sens
       test_point(sensor, spec, v.scan_length_mm, r.transpose() * (rough.points[row] - v.position), r.transpose() * rough.normals[row]);
   if (!t.compliant) return false;
   OcclusionRay rays[2];
-  pair_rays(rough.points[row], rough.normals[row], v, r, t, ray_offset(rough, settings), 0.0, rays);
+  (void)pair_rays(rough.points[row], rough.normals[row], v, r, t, ray_offset(rough, settings), 0.0, rays);
   std::uint8_t occ[2];
   scene.occluded(rays, 2, occ);
   return !occ[0] && !occ[1];

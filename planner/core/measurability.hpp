@@ -92,13 +92,22 @@ struct MatrixSettings {
   Countermeasures countermeasures;  // none by default
 };
 
+/// The elements a plainer test gives (e.g. without the free-space margin), built in the same pass as the matrix:
+/// `matrix` holds, per column, the rows the plain test measures and the matrix's test does not.
+struct PlainElements {
+  Countermeasures countermeasures;  // each at most the matrix's own
+  MeasurabilityMatrix matrix;       // filled by build_measurability
+};
+
 /// Builds M in parallel over candidates (oneTBB). Rows are visited in the rough model's Morton order, blocks of
 /// rows are culled by bounding sphere, single points by frustum, facing and specification before any ray, and
-/// the surviving pairs' two occlusion rays are streamed through Embree. Deterministic for any thread count.
+/// the surviving pairs' two occlusion rays are streamed through Embree (a near-miss margin's eight more only
+/// for the pairs those two leave clear). Deterministic for any thread count. With `plain`, the plain test's
+/// extra elements too, at the cost of the rays only they need.
 MeasurabilityMatrix build_measurability(const RoughModel& rough, const OcclusionScene& scene, const SensorModel& sensor,
                                         const ModelSpec& spec, const std::vector<Viewpoint>& candidates,
                                         const MatrixSettings& settings = {}, MatrixStats* stats = nullptr,
-                                        const std::atomic<int>* cancel = nullptr);
+                                        const std::atomic<int>* cancel = nullptr, PlainElements* plain = nullptr);
 
 /// The same element test with no culling at all: every pair is transformed and both rays cast whatever the
 /// analytic tests say. The thesis' O(s²v) reference; for benchmarks and cross-checks only.

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <numeric>
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
@@ -167,9 +168,18 @@ std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const Occlus
   // more densely, and never lets the two sides of a thin wall share one position.
   const bool decoupled = st.scheme == ViewpointScheme::decoupled;
   const int d_t = decoupled ? st.twist_levels : 1;
-  const std::size_t n_positions =
+  const std::size_t by_decimation =
       decoupled ? std::max<std::size_t>(1, rough.size() / static_cast<std::size_t>(st.position_decimation)) : rough.size();
   const double normal_weight_mm = sensor.optimal_standoff_mm * std::tan(0.5 * sensor.fov_x_rad);
+  std::size_t n_positions = by_decimation;
+  if (decoupled && st.min_position_spacing_fraction > 0.0) {
+    // The footprint, not the mesh, sets how finely positions need to be sampled: positions a few percent of
+    // its width apart see nearly the same rows (a view's coverage varies slowly with its position).
+    const double spacing_mm = st.min_position_spacing_fraction * 2.0 * normal_weight_mm;
+    const double area = std::accumulate(rough.area_mm2.begin(), rough.area_mm2.end(), 0.0);
+    n_positions = std::min(n_positions, std::max<std::size_t>(1, static_cast<std::size_t>(std::ceil(area / (spacing_mm * spacing_mm)))));
+  }
+  rep.positions_by_decimation = by_decimation;
   std::vector<std::uint32_t> target_rows = farthest_point_sample(rough, n_positions, normal_weight_mm);
   std::sort(target_rows.begin(), target_rows.end());  // candidate order follows the rows, not the sampling order
   std::vector<Eigen::Vector3d> target_normals;

@@ -51,6 +51,11 @@ struct ViewpointSettings {
   ViewpointScheme scheme = ViewpointScheme::decoupled;
   double standoff_factor = 1.02;                 // f_d
   int position_decimation = 4;                   // d_v (DECOUPLED)
+  /// Positions no denser than one per (f·w)² of surface, w the footprint width at R_o (DECOUPLED; 0: d_v alone).
+  /// d_v alone ties the candidate count to the mesh's vertex count: a 38k-vertex mesh as given had 9.4k
+  /// positions 3 mm apart under a 68 mm footprint, and the matrix cost grows with positions × rows. At 0.07
+  /// (4.8 mm for the thesis sensor) 5k-row rough models of 200 mm objects keep every position.
+  double min_position_spacing_fraction = 0.07;
   int twist_levels = 8;                          // d_t (DECOUPLED)
   double standoff_adjust_max_mm = 60.0;          // cap on R_a
   double scan_length_design_incidence_rad = 0.5235987755982988;  // incidence at which the density must hold
@@ -76,6 +81,7 @@ struct ViewpointSettings {
 
 struct GenerationReport {
   std::size_t positions = 0;         // viewpoint positions (RM_v vertices)
+  std::size_t positions_by_decimation = 0;  // what d_v alone asked for (more when the spacing limit applied)
   std::size_t candidates = 0;        // kept
   std::size_t dropped_inside = 0;    // camera position inside the object
   std::size_t dropped_clearance = 0; // camera position closer to the object than the clearance

@@ -48,10 +48,7 @@ write_config "{driver: sim}" "$JOBS, allowed_dirs: [$SRC/tests/data, $W/inbox]}"
 start_sim
 lcm-logger --lcm-url="udpm://239.255.76.67:$LCM_PORT?ttl=0" -q "$W/lcm.log" &
 LOGGER_PID=$!
-"$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" > "$W/daemon.log" 2>&1 &
-DAEMON_PID=$!
-for _ in $(seq 400); do [ -S "$W/control.sock" ] && break; sleep 0.025; done
-[ -S "$W/control.sock" ] || fail "daemon did not start"
+start_daemon || fail "daemon did not start"
 [ "$(stat -c %a "$W/control.sock")" = 660 ] || fail "socket mode $(stat -c %a "$W/control.sock")"
 
 # 2b. A second daemon on the same data directory (and socket) is refused, naming the running one's PID, and
@@ -148,9 +145,7 @@ wait "$HANG_PID" 2>/dev/null
 awk -v a="$t0" -v b="$(date +%s.%N)" 'BEGIN { printf "daemon_cli: stopped %.1f s after SIGTERM with a hanging mesh read under way\n", b - a }'
 grep -q "scancelld: stopped" "$W/daemon.log" || fail "no clean stop"
 # 7. A restarted daemon loads the calibration its run wrote.
-"$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" > "$W/daemon2.log" 2>&1 &
-DAEMON_PID=$!
-for _ in $(seq 400); do [ -S "$W/control.sock" ] && break; sleep 0.025; done
+start_daemon "$W/daemon2.log" || fail "restarted daemon did not start"
 ctl status | grep -q "turntable_axis-" || fail "restarted daemon did not load $calfile"
 kill -TERM "$DAEMON_PID"; wait "$DAEMON_PID"; DAEMON_PID=""
 kill -TERM "$LOGGER_PID"; wait "$LOGGER_PID" 2>/dev/null; LOGGER_PID=""

@@ -40,4 +40,14 @@ start_sim() {
   echo "the drive simulator did not start:"; cat "$W/sim.log"; exit 1
 }
 
+# start_daemon [LOG]: scancelld on $W/scancelld.yaml in the background (DAEMON_PID), logging to LOG (default
+# $W/daemon.log); returns once its control socket is up, or 1 with the log shown when it is not within 10 s.
+start_daemon() {
+  local log="${1:-$W/daemon.log}"
+  "$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" > "$log" 2>&1 &
+  DAEMON_PID=$!
+  for _ in $(seq 400); do [ -S "$W/control.sock" ] && return 0; sleep 0.025; done
+  echo "scancelld did not start:"; cat "$log"; return 1
+}
+
 ctl() { "$BUILD/tools/scancellctl" --socket "$W/control.sock" "$@"; }

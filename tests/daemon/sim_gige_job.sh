@@ -16,10 +16,7 @@ write_drivers
 write_config "{driver: sim_gige, device: 127.0.0.1, profiles_per_frame: 16}" \
   "{max_rounds: 1, move_timeout_s: 20, scan_speed_mm_s: 100, home_timeout_s: 20}"
 start_sim
-"$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" > "$W/daemon.log" 2>&1 &
-DAEMON_PID=$!
-for _ in $(seq 400); do [ -S "$W/control.sock" ] && break; sleep 0.025; done
-[ -S "$W/control.sock" ] || fail "daemon did not start"
+start_daemon || fail "daemon did not start"
 ctl submit --mesh "$SRC/tests/data/cube50.off" --rough-vertices 400 > /dev/null || fail "submit"
 timeout 240 "$BUILD/tools/scancellctl" --socket "$W/control.sock" watch 1 > "$W/watch.log"; rc=$?
 ctl status 1 > "$W/status.json"

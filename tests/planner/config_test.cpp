@@ -33,6 +33,7 @@ TEST(Config, ShippedSensorIsTheThesisSensor) {
   const PlannerSettings p = load_planner_settings(testing::source_path("config/planner/default.yaml"));
   EXPECT_EQ(p.viewpoints.twist_levels, 8);
   EXPECT_EQ(p.viewpoints.position_decimation, 4);
+  EXPECT_EQ(p.viewpoints.min_position_spacing_fraction, 0.07);
   EXPECT_EQ(p.cover.mode, CoverMode::constrained);
 }
 
@@ -110,6 +111,13 @@ TEST(Config, MissingFileAndBadPlannerSettings) {
     ADD_FAILURE() << "accepted twist_levels 0";
   } catch (const ConfigError& e) {
     EXPECT_THAT(e.what(), HasSubstr("viewpoints.twist_levels: must be in [1, 360]"));
+  }
+  std::ofstream(p) << "viewpoints:\n  min_position_spacing_fraction: 1.5\n";
+  try {
+    load_planner_settings(p);
+    ADD_FAILURE() << "accepted min_position_spacing_fraction 1.5";
+  } catch (const ConfigError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("viewpoints.min_position_spacing_fraction: must be in [0, 1], got 1.5"));
   }
   std::ofstream(p) << "cover:\n  mode: exhaustive\n";
   EXPECT_THROW(load_planner_settings(p), ConfigError);

@@ -1,6 +1,8 @@
 // Known geometries: what one viewpoint can and cannot measure, and what the whole planner does with them.
 #include <atomic>
 #include <numbers>
+#include <numeric>
+#include <iterator>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -8,6 +10,7 @@
 #include "common/errors.hpp"
 #include "planner/core/measurability.hpp"
 #include "planner/plan.hpp"
+#include "planner/sim/synthetic.hpp"
 #include "test_meshes.hpp"
 
 namespace scancell::planner {
@@ -202,6 +205,69 @@ TEST(Geometry, CulledMatrixEqualsNaiveAllPairs) {
   } catch (const PlanCancelled& e) {
     EXPECT_THAT(e.what(), ::testing::HasSubstr("while building the measurability matrix"));
   }
+}
+
+TEST(Geometry, TheMarginsNearMissRaysAndThePlainElementsComeFromOnePass) {
+  // A bore's wall: near-miss rays matter there. The tight matrix (margin 1 mm, buffer 0.1) with the plain
+  // elements from the same pass must equal two separate builds: tight, and plain minus tight.
+  const RoughModel rm = make_rough_model(cylinder_with_bore(80, 30, 50, 4.0));
+  const OcclusionScene scene(rm.mesh());
+  const SensorModel sensor = testing::thesis_sensor();
+  const ModelSpec spec = testing::thesis_spec();
+  ViewpointSettings vs;
+  vs.twist_levels = 4;
+  const auto cands = generate_viewpoints(rm, scene, sensor, spec, vs);
+  ASSERT_GT(cands.size(), 100u);
+  MatrixSettings tight;
+  tight.countermeasures.compliance_buffer = 0.1;
+  tight.countermeasures.visibility_margin_mm = 1.0;
+  PlainElements plain{{}, {}};
+  MatrixStats st;
+  const auto one_pass = build_measurability(rm, scene, sensor, spec, cands, tight, &st, nullptr, &plain);
+  const auto plain_alone = build_measurability(rm, scene, sensor, spec, cands, {});
+  ASSERT_EQ(plain.matrix.n_cols(), cands.size());
+  std::size_t extra = 0, tight_nonzeros = 0;
+  for (std::size_t j = 0; j < cands.size(); ++j) {
+    const auto t = one_pass.columns[j].rows(), e = plain.matrix.columns[j].rows();
+    std::vector<std::uint32_t> both;
+    std::set_union(t.begin(), t.end(), e.begin(), e.end(), std::back_inserter(both));
+    ASSERT_EQ(both.size(), t.size() + e.size()) << "column " << j << ": a row is both tight and plain-only";
+    ASSERT_EQ(both, plain_alone.columns[j].rows()) << "column " << j;
+    extra += e.size();
+    tight_nonzeros += t.size();
+  }
+  EXPECT_GT(extra, tight_nonzeros / 20);  // the margin does cut elements here
+  // Near-miss rays only for pairs the two undisplaced rays leave clear: fewer than 10 per compliant pair.
+  EXPECT_LT(st.rays_cast, 10 * st.pairs_compliant);
+  // Without the plain request the same tight matrix.
+  const auto alone = build_measurability(rm, scene, sensor, spec, cands, tight);
+  for (std::size_t j = 0; j < cands.size(); ++j) ASSERT_EQ(alone.columns[j].rows(), one_pass.columns[j].rows());
+  // A plain test tighter than the matrix's is a programming error, refused.
+  PlainElements wrong{{0, 0, 0.2, 0}, {}};
+  EXPECT_THROW(build_measurability(rm, scene, sensor, spec, cands, tight, nullptr, nullptr, &wrong), std::invalid_argument);
+}
+
+TEST(Geometry, ViewpointPositionsFollowTheFootprintNotTheMeshDensity) {
+  // A 40 mm sphere sampled finely: d_v = 4 alone would give a position every 4 rows. The footprint of the
+  // thesis sensor at R_o = 142 mm is 2·142·tan(13.5°) = 68.18 mm wide; at 0.07 of it (4.773 mm) positions
+  // are no denser than one per 22.78 mm², i.e. ceil(area / 22.72) of them.
+  const RoughModel rm = make_rough_model(testing::uv_sphere({0, 0, 0}, 40.0, 80, 160));
+  const OcclusionScene scene(rm.mesh());
+  const double area = std::accumulate(rm.area_mm2.begin(), rm.area_mm2.end(), 0.0);
+  ASSERT_NEAR(area, 4 * std::numbers::pi * 40 * 40, 0.01 * 4 * std::numbers::pi * 40 * 40);
+  ViewpointSettings st;
+  st.bisector_tilt = false;
+  st.twist_levels = 1;
+  GenerationReport rep;
+  (void)generate_viewpoints(rm, scene, testing::thesis_sensor(), testing::thesis_spec(), st, &rep);
+  const double spacing = 0.07 * 68.18;
+  EXPECT_EQ(rep.positions_by_decimation, rm.size() / 4);
+  EXPECT_NEAR(double(rep.positions), std::ceil(area / (spacing * spacing)), 1.0);
+  EXPECT_LT(rep.positions, rm.size() / 4);
+  // 0 turns the limit off: d_v alone.
+  st.min_position_spacing_fraction = 0.0;
+  (void)generate_viewpoints(rm, scene, testing::thesis_sensor(), testing::thesis_spec(), st, &rep);
+  EXPECT_EQ(rep.positions, rm.size() / 4);
 }
 
 TEST(Geometry, SingleBestViewSeesAWholeSmallSegment) {
