@@ -92,28 +92,6 @@ void write_deviation_png(const std::vector<Eigen::Vector3d>& points, const std::
 
 }  // namespace
 
-void write_coverage_picture(const sp::TriangleMesh& truth, const std::vector<std::uint8_t>& measured, const std::string& title,
-                            const std::filesystem::path& png) {
-  const ScratchDir dir("scancell-coverage-png");
-  const int tile = 320;
-  sp::write_measurability_png(truth, measured, dir.path / "tiles.png", tile);
-  // The tiles' order and layout as write_measurability_png draws them: 3 across, 2 down.
-  const char* names[6] = {"from +X", "from -X", "from +Y", "from -Y", "from +Z (above)", "from -Z (below)"};
-  std::ostringstream s;
-  s << "set title " << gnuplot_text(title) << " font ',12' noenhanced\n"
-    << "unset border\nunset tics\nunset xlabel\nunset ylabel\nset size ratio -1\n"
-    << "set xrange [0:" << 3 * tile << "]\nset yrange [0:" << 2 * tile << "]\n"
-    << "set key outside bottom center horizontal samplen 1 font ',10'\n"
-    << "set style textbox opaque fc rgb '#23272f' noborder\n";
-  for (int t = 0; t < 6; ++t)
-    s << "set label " << t + 1 << " '" << names[t] << "' at " << (t % 3) * tile + tile / 2 << "," << 2 * tile - (t / 3) * tile - 14
-      << " center front boxed tc rgb 'white' font ',11'\n";
-  s << "plot " << gnuplot_quoted((dir.path / "tiles.png").string()) << " binary filetype=png with rgbimage notitle, "
-    << "NaN w p pt 5 ps 2 lc rgb '#b4b4b4' t 'measured to the spec (shaded by the surface normal)', "
-    << "NaN w p pt 5 ps 2 lc rgb '#d0403a' t 'not measured to the spec'\n";
-  run_gnuplot("pngcairo size 1240,860 font 'sans,10'", s.str(), png, "coverage picture");
-}
-
 nlohmann::json write_job_report(const std::filesystem::path& file, std::int64_t job, const sp::ModelSpec& spec,
                                 const sp::TriangleMesh& reference, const std::string& reference_name,
                                 const std::string& reference_kind, const CloudSummary& cloud, const ModelSummary& model,

@@ -41,12 +41,6 @@ ModelSummary write_job_model(const CloudSummary& cloud, const planner::ModelSpec
 /// coloured by signed deviation with its colour bar, titled with the job, reference, date, spec and figures;
 /// the report names it (`deviation_png`) or says why it is missing (`deviation_png_error`). Written
 /// durably; returns the report.
-/// `png`: the verified coverage of `truth` as six orthographic views (planner::write_measurability_png:
-/// measured grey shaded by the normal, unmeasured red), each labelled with its direction, with a legend and
-/// `title` (the headline numbers) above, drawn by gnuplot. std::runtime_error when gnuplot fails.
-void write_coverage_picture(const planner::TriangleMesh& truth, const std::vector<std::uint8_t>& measured,
-                            const std::string& title, const std::filesystem::path& png);
-
 nlohmann::json write_job_report(const std::filesystem::path& file, std::int64_t job, const planner::ModelSpec& spec,
                                 const planner::TriangleMesh& reference, const std::string& reference_name,
                                 const std::string& reference_kind, const CloudSummary& cloud, const ModelSummary& model,

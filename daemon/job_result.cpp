@@ -208,17 +208,13 @@ json simulation_truth_checks(const std::vector<sp::RangeImage>& images, const sp
   std::filesystem::create_directories(dir);
   char title[512];
   std::snprintf(title, sizeof title,
-                "coverage of %s by %zu views: verified m_v %.4f of %.0f mm² (virtual scanner, object on the table), "
+                "coverage of %s by %zu views\nverified m_v %.4f of %.0f mm² (virtual scanner, object on the table), "
                 "spec %g mm, %g samples/mm²",
                 std::filesystem::path(truth_name).filename().c_str(), images.size(), v.mv, v.area_mm2, spec.precision_mm,
                 spec.density_per_mm2);
-  try {
-    write_coverage_picture(truth, v.measured, title, dir / "coverage.png");
-  } catch (const std::exception& e) {
-    // Without gnuplot the picture is the bare six views: said, not hidden.
-    sp::write_measurability_png(truth, v.measured, (dir / "coverage.png").string());
-    out["coverage_png_error"] = std::string(e.what()) + "; coverage.png has no legend or title";
-  }
+  // Without gnuplot the picture is the bare six views: said, not hidden.
+  if (const std::string why = sp::write_coverage_picture(truth, v.measured, title, dir / "coverage.png"); !why.empty())
+    out["coverage_png_error"] = why;
   sp::write_coverage_ply(truth, v.measured, (dir / "coverage.ply").string());
   out["coverage_png"] = (dir / "coverage.png").string();
   out["coverage_ply"] = (dir / "coverage.ply").string();

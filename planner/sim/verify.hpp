@@ -92,4 +92,11 @@ void write_coverage_ply(const TriangleMesh& mesh, const std::vector<std::uint8_t
 void write_measurability_png(const TriangleMesh& mesh, const std::vector<std::uint8_t>& measured,
                              const std::filesystem::path& path, int tile_px = 320);
 
+/// The coverage picture people read (issue 19): write_measurability_png's six views, each labelled with its
+/// direction, a legend below and `title` (the headline numbers) above, drawn by gnuplot (1240 × 860).
+/// Returns "" when drawn. Without gnuplot, or when it fails, `png` gets the bare views and the return value
+/// says why (the caller reports it: a picture without its legend is not passed off as the real one).
+std::string write_coverage_picture(const TriangleMesh& mesh, const std::vector<std::uint8_t>& measured,
+                                   const std::string& title, const std::filesystem::path& png);
+
 }  // namespace scancell::planner

@@ -13,6 +13,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "common/test_png.hpp"
 #include "daemon/acquire.hpp"
 #include "daemon/cell_io.hpp"
 #include "daemon/job_runner.hpp"
@@ -232,21 +233,7 @@ struct LossyHead : ScanHead, drivers::Scanner {
 // sweep's last frame lost: the scanner goes quiet, acquire_view's wait times out and keeps what came): the
 // sweep axis returns and sweeps again firing only at the rows left without a profile, and they land where they belong (between their neighbours in
 // the view frame, on the row-index line of the first pass). With fill_sweeps 0 the holes stay and are counted.
-/// A whole PNG of this size: the signature, the IHDR width and height, drawn (over `min_bytes`), no .tmp left.
-void expect_whole_png(const std::string& file, std::uint32_t width, std::uint32_t height, std::uintmax_t min_bytes) {
-  std::ifstream png(file, std::ios::binary);
-  std::string head(24, '\0');
-  ASSERT_TRUE(png.read(head.data(), 24)) << file;
-  EXPECT_EQ(head.substr(1, 3), "PNG") << file;
-  auto be32 = [&](int at) {
-    return (std::uint32_t(std::uint8_t(head[at])) << 24) | (std::uint32_t(std::uint8_t(head[at + 1])) << 16) |
-           (std::uint32_t(std::uint8_t(head[at + 2])) << 8) | std::uint32_t(std::uint8_t(head[at + 3]));
-  };
-  EXPECT_EQ(be32(16), width) << file;
-  EXPECT_EQ(be32(20), height) << file;
-  EXPECT_GT(fs::file_size(file), min_bytes) << file;
-  EXPECT_FALSE(fs::exists(file + ".tmp")) << file;
-}
+using scancell::test_support::expect_whole_png;
 
 TEST_F(SimCell, FillSweepsTakeTheProfilesASweepMissedAndOnlyThose) {
   sp::TriangleMesh cube = sp::load_mesh(write_cube(dir));

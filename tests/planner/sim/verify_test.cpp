@@ -14,6 +14,8 @@
 #include "planner/plan_file.hpp"
 #include "planner/sim/synthetic.hpp"
 #include "planner/sim/verify.hpp"
+#include "common/gnuplot.hpp"
+#include "common/test_png.hpp"
 #include "test_meshes.hpp"
 
 namespace sp = scancell::planner;
@@ -287,4 +289,24 @@ TEST(Baselines, TurntableAndViewSphereLookAtTheCentre) {
   EXPECT_EQ(sp::icosphere_directions(3).size(), 642u);
   const auto sphere = sp::view_sphere_candidates(box, s, spec, 2, 4);
   EXPECT_EQ(sphere.size(), 162u * 4u);
+}
+
+// Issue 19: the coverage picture people read — labelled views, legend, title — and, without gnuplot, the bare
+// views with the reason returned (never passed off as the labelled one).
+TEST(CoveragePicture, LabelledWithGnuplotBareWithTheReasonWithout) {
+  const scancell::ScratchDir dir("scancell-coverage-picture-test");
+  sp::TriangleMesh box;
+  scancell::planner::testing::add_box(box, {-30, -20, -10}, {30, 20, 10}, 5.0);
+  std::vector<std::uint8_t> measured(box.vertices.size(), 1);
+  for (std::size_t i = 0; i < box.vertices.size(); ++i) measured[i] = box.vertices[i].z() > -9.0;  // the base not
+  const auto png = dir.path / "coverage.png";
+  EXPECT_EQ(sp::write_coverage_picture(box, measured, "box: 3 views\nverified m_v 0.83", png), "");
+  scancell::test_support::expect_whole_png(png.string(), 1240, 860, 10000);
+  const std::string old_path = std::getenv("PATH") ? std::getenv("PATH") : "";
+  setenv("PATH", dir.path.c_str(), 1);  // no gnuplot there
+  const std::string why = sp::write_coverage_picture(box, measured, "box", png);
+  setenv("PATH", old_path.c_str(), 1);
+  EXPECT_THAT(why, ::testing::HasSubstr("needs gnuplot on the PATH"));
+  EXPECT_THAT(why, ::testing::HasSubstr("no legend or title"));
+  scancell::test_support::expect_whole_png(png.string(), 960, 640, 1000);  // the six bare 320-px views
 }
