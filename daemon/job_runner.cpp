@@ -65,6 +65,7 @@ std::vector<std::string> view_records(const sp::ViewPlan& p) {
 
 struct JobRunner::Job {
   std::int64_t id = 0;
+  const std::atomic<int>* stop = nullptr;  // the run's stop request (pause, abort, shutdown)
   JobRequest request;
   sp::ModelSpec spec;
   sp::PlannerSettings settings;
@@ -136,7 +137,8 @@ json JobRunner::next_setup(Job& j) {
   try {
     const std::vector<std::uint8_t> measured = j.coverage->measured_rows();
     const sp::NextSetup n = sp::plan_next_setup(j.object, models_.sensor, j.spec, j.settings, j.rough_options,
-                                                settings_.planner_threads, models_.cell, j.cell.object_on_table.linear(), measured);
+                                                settings_.planner_threads, models_.cell, j.cell.object_on_table.linear(), measured,
+                                                j.stop);
     journal_.event(j.id, "next setup: " + n.reason);
     json out = {{"reason", n.reason}, {"unmeasured_area_mm2", n.unmeasured_area_mm2}, {"poses_planned", n.options.size()}};
     if (n.pose < 0) return out;
@@ -155,8 +157,11 @@ json JobRunner::next_setup(Job& j) {
     sp::write_measurability_png(turned, measured, png.string());
     out["picture"] = png.string();
     return out;
-  } catch (const scancell::PlanCancelled&) {
-    throw;
+  } catch (const scancell::PlanCancelled& e) {
+    // A stop (pause, abort, shutdown) while the advice is planned: the job's outcome stands without it, and
+    // the daemon does not wait for the planner.
+    journal_.event(j.id, std::string("next setup not planned: ") + e.what());
+    return json{{"error", std::string("not planned: a stop was requested while planning it (") + e.what() + ")"}};
   } catch (const std::exception& e) {
     return json{{"error", e.what()}};  // the job's outcome stands; the advice failed and says why
   }
@@ -552,6 +557,7 @@ std::optional<JobState> JobRunner::close_or_replan(Job& j, std::int64_t plan, co
 JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
   Job j;
   j.id = id;
+  j.stop = &stop;
   j.progress.job = id;
   const JobRecord rec = journal_.job(id);
   j.progress.state = rec.state;
