@@ -443,62 +443,71 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
   return p;
 }
 
-nlohmann::json plan_to_json(const ViewPlan& p) {
-  using nlohmann::json;
-  json j;
-  j["format"] = "scancell-plan";
-  j["version"] = 1;
-  j["units"] = {{"length", "mm"}, {"angle", "rad"}, {"density", "samples/mm^2"}, {"time", "s"}};
-  j["camera_frame"] =
-      "x along the laser fan, y along the sweep and baseline (receiver at +y), boresight -z; transform maps camera "
-      "to object coordinates";
-  const SensorModel& s = p.sensor;
-  j["sensor"] = {{"name", s.name},
-                 {"kind", to_string(s.kind)},
-                 {"fov_x_rad", s.fov_x_rad},
-                 {"fov_y_rad", s.fov_y_rad},
-                 {"scan_length_min_mm", s.scan_length_min_mm},
-                 {"scan_length_max_mm", s.scan_length_max_mm},
-                 {"range_min_mm", s.range_min_mm},
-                 {"range_max_mm", s.range_max_mm},
-                 {"optimal_standoff_mm", s.optimal_standoff_mm},
-                 {"baseline_mm", s.baseline_mm},
-                 {"samples_x", s.samples_x},
-                 {"samples_y", s.samples_y},
-                 {"noise", {{"cx", s.noise_cx}, {"cy", s.noise_cy}, {"cz_per_mm", s.noise_cz_per_mm}}},
-                 {"grazing", {{"t_xz_rad", s.grazing_xz_rad}, {"t_yz_rad", s.grazing_yz_rad}}}};
-  j["spec"] = {{"name", p.spec.name},
-               {"precision_mm", p.spec.precision_mm},
-               {"density_per_mm2", p.spec.density_per_mm2},
-               {"coverage_goal", p.spec.coverage_goal}};
+namespace {
+
+using nlohmann::json;
+
+json sensor_json(const SensorModel& s) {
+  return {{"name", s.name},
+          {"kind", to_string(s.kind)},
+          {"fov_x_rad", s.fov_x_rad},
+          {"fov_y_rad", s.fov_y_rad},
+          {"scan_length_min_mm", s.scan_length_min_mm},
+          {"scan_length_max_mm", s.scan_length_max_mm},
+          {"range_min_mm", s.range_min_mm},
+          {"range_max_mm", s.range_max_mm},
+          {"optimal_standoff_mm", s.optimal_standoff_mm},
+          {"baseline_mm", s.baseline_mm},
+          {"samples_x", s.samples_x},
+          {"samples_y", s.samples_y},
+          {"noise", {{"cx", s.noise_cx}, {"cy", s.noise_cy}, {"cz_per_mm", s.noise_cz_per_mm}}},
+          {"grazing", {{"t_xz_rad", s.grazing_xz_rad}, {"t_yz_rad", s.grazing_yz_rad}}}};
+}
+
+/// The settings as applied (the countermeasures merged: the plan says what its matrix used).
+json settings_json(const ViewPlan& p) {
   const auto& vs = p.settings.viewpoints;
-  j["settings"] = {{"seed", p.settings.seed},
-                   {"viewpoints",
-                    {{"scheme", to_string(vs.scheme)},
-                     {"standoff_factor", vs.standoff_factor},
-                     {"position_decimation", vs.position_decimation},
-                     {"min_position_spacing_fraction", vs.min_position_spacing_fraction},
-                     {"twist_levels", vs.twist_levels},
-                     {"standoff_adjust_max_mm", vs.standoff_adjust_max_mm},
-                     {"scan_length_design_incidence_rad", vs.scan_length_design_incidence_rad},
-                     {"clearance_mm", vs.clearance_mm},
-                     {"bisector_tilt", vs.bisector_tilt},
-                     {"open_direction_views", vs.open_direction_views},
-                     {"open_direction_standoffs", vs.open_direction_standoffs},
-                     {"open_directions_per_row", vs.open_directions_per_row},
-                     {"cell_native", vs.cell_native},
-                     {"cell_oblique_rad", vs.cell_oblique_rad},
-                     {"cell_standoff_steps", vs.cell_standoff_steps}}},
-                   {"cover",
-                    {{"mode", to_string(p.settings.cover.mode)},
-                     {"registration_threshold", p.settings.cover.registration_threshold},
-                     {"registration_normalizer", to_string(p.settings.cover.normalizer)},
-                     {"eliminate_redundant", p.settings.cover.eliminate_redundant},
-                     {"exact_time_limit_s", p.settings.cover.exact_time_limit_s},
-                     {"min_view_gain_mm2", p.settings.cover.min_view_gain},
-                     {"local_search_iterations", p.settings.cover.local_search_iterations},
-                     {"local_search_time_limit_s", p.settings.cover.local_search_time_limit_s}}},
-                   {"matrix", {{"ray_offset_mm", p.settings.matrix.ray_offset_mm}}}};
+  json out = {{"seed", p.settings.seed},
+              {"viewpoints",
+               {{"scheme", to_string(vs.scheme)},
+                {"standoff_factor", vs.standoff_factor},
+                {"position_decimation", vs.position_decimation},
+                {"min_position_spacing_fraction", vs.min_position_spacing_fraction},
+                {"twist_levels", vs.twist_levels},
+                {"standoff_adjust_max_mm", vs.standoff_adjust_max_mm},
+                {"scan_length_design_incidence_rad", vs.scan_length_design_incidence_rad},
+                {"clearance_mm", vs.clearance_mm},
+                {"bisector_tilt", vs.bisector_tilt},
+                {"open_direction_views", vs.open_direction_views},
+                {"open_direction_standoffs", vs.open_direction_standoffs},
+                {"open_directions_per_row", vs.open_directions_per_row},
+                {"cell_native", vs.cell_native},
+                {"cell_oblique_rad", vs.cell_oblique_rad},
+                {"cell_standoff_steps", vs.cell_standoff_steps}}},
+              {"cover",
+               {{"mode", to_string(p.settings.cover.mode)},
+                {"registration_threshold", p.settings.cover.registration_threshold},
+                {"registration_normalizer", to_string(p.settings.cover.normalizer)},
+                {"eliminate_redundant", p.settings.cover.eliminate_redundant},
+                {"exact_time_limit_s", p.settings.cover.exact_time_limit_s},
+                {"min_view_gain_mm2", p.settings.cover.min_view_gain},
+                {"local_search_iterations", p.settings.cover.local_search_iterations},
+                {"local_search_time_limit_s", p.settings.cover.local_search_time_limit_s}}},
+              {"matrix", {{"ray_offset_mm", p.settings.matrix.ray_offset_mm}}}};
+  {
+    const Countermeasures& cm = p.settings.matrix.countermeasures;
+    out["matrix"]["countermeasures"] = {{"frustum_detune", cm.frustum_detune},
+                                        {"dof_margin_mm", cm.dof_margin_mm},
+                                        {"compliance_buffer", cm.compliance_buffer},
+                                        {"visibility_margin_mm", cm.visibility_margin_mm},
+                                        {"from_cell_pose_error", p.settings.countermeasures_from_cell},
+                                        {"free_space_margin_applied", p.free_space_margin_applied}};
+  }
+  return out;
+}
+
+/// The mesh the plan was made for and its rough model.
+void object_json(const ViewPlan& p, json& j) {
   Eigen::Matrix4d obj = Eigen::Matrix4d::Identity();
   obj.topLeftCorner<3, 3>() *= p.object.scale;
   const json objt = row_major_json(obj);
@@ -518,7 +527,9 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
   if (p.rough_options.target_vertices) rough["target_vertices"] = *p.rough_options.target_vertices;
   if (p.rough_options.rho_rel) rough["rho_rel"] = *p.rough_options.rho_rel;
   j["rough_model"] = rough;
+}
 
+json views_json(const ViewPlan& p) {
   json views = json::array();
   for (std::size_t k = 0; k < p.views.size(); ++k) {
     const Viewpoint& v = p.views[k];
@@ -547,12 +558,15 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
       views[k]["scan_time_s"] = p.view_scan_s[k];
     }
   }
-  j["views"] = views;
+  return views;
+}
+
+json summary_json(const ViewPlan& p) {
   json edges = json::array();
   for (const auto& e : p.cover.registration_edges) edges.push_back({{"a", e.a}, {"b", e.b}, {"sigma", e.sigma}});
   const double est = p.cover.cumulative_fraction.empty() ? 0.0 : p.cover.cumulative_fraction.back();
   const double pts = p.cover.cumulative_point_fraction.empty() ? 0.0 : p.cover.cumulative_point_fraction.back();
-  j["summary"] = {
+  return {
       {"rows_s", p.rough.size()},
       {"candidates_v", p.candidates},
       {"viewpoint_positions", p.generation.positions},
@@ -592,15 +606,10 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
         {"cover", p.times.cover_s},
         {"total", p.times.total_s()}}},
       {"threads", p.threads}};
-  {
-    const Countermeasures& cm = p.settings.matrix.countermeasures;
-    j["settings"]["matrix"]["countermeasures"] = {{"frustum_detune", cm.frustum_detune},
-                                                  {"dof_margin_mm", cm.dof_margin_mm},
-                                                  {"compliance_buffer", cm.compliance_buffer},
-                                                  {"visibility_margin_mm", cm.visibility_margin_mm},
-                                                  {"from_cell_pose_error", p.settings.countermeasures_from_cell},
-                                                  {"free_space_margin_applied", p.free_space_margin_applied}};
-  }
+}
+
+/// The cell planned for and what it did to the candidates.
+void cell_json(const ViewPlan& p, json& j) {
   if (p.cell) {
     const auto& c = *p.cell;
     json axes = json::array();
@@ -635,6 +644,10 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
                             {"total_time_s", p.cell_report.travel_s + p.cell_report.scan_s}};
     if (p.placement) j["summary"]["placement"] = placement_to_json(*p.placement);
   }
+}
+
+/// The cover's own report: the local search's, or the exact solver's.
+void cover_report_json(const ViewPlan& p, json& j) {
   if (p.local_search.start_views > 0) {
     const LocalSearchReport& ls = p.local_search;
     j["summary"]["local_search"] = {{"start_views", ls.start_views},
@@ -673,6 +686,29 @@ nlohmann::json plan_to_json(const ViewPlan& p) {
                                 {"dominated_columns", e.dominated_columns},
                                 {"dominance_budget_hit", e.dominance_budget_hit}}}};
   }
+}
+
+}  // namespace
+
+nlohmann::json plan_to_json(const ViewPlan& p) {
+  json j;
+  j["format"] = "scancell-plan";
+  j["version"] = 1;
+  j["units"] = {{"length", "mm"}, {"angle", "rad"}, {"density", "samples/mm^2"}, {"time", "s"}};
+  j["camera_frame"] =
+      "x along the laser fan, y along the sweep and baseline (receiver at +y), boresight -z; transform maps camera "
+      "to object coordinates";
+  j["sensor"] = sensor_json(p.sensor);
+  j["spec"] = {{"name", p.spec.name},
+               {"precision_mm", p.spec.precision_mm},
+               {"density_per_mm2", p.spec.density_per_mm2},
+               {"coverage_goal", p.spec.coverage_goal}};
+  j["settings"] = settings_json(p);
+  object_json(p, j);
+  j["views"] = views_json(p);
+  j["summary"] = summary_json(p);
+  cell_json(p, j);
+  cover_report_json(p, j);
   return j;
 }
 
