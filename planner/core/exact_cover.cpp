@@ -7,6 +7,7 @@
 #include <csignal>
 #include <cstdio>
 #include <cstring>
+#include <functional>
 #include <map>
 #include <numeric>
 #include <sstream>
@@ -291,81 +292,53 @@ class Streamer : public CbcEventHandler {
   }
 }
 
-}  // namespace
-
-CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>& w, const CoverSettings& st,
-                        const std::vector<double>& cost_in, ExactReport* report) {
-  const auto t0 = Clock::now();
-  if (w.size() != m.n_rows) throw std::invalid_argument("exact_cover: one weight per row required");
-  if (st.coverage_goal < 1.0 - 1e-12)
-    throw ConfigError("cover.mode exact covers every measurable row: the spec's coverage_goal must be 1");
-  ExactReport rep;
-  rep.solver = std::string("CBC ") + CBC_VERSION;
-  Problem P;
-  P.m = &m;
-  P.w = &w;
-  P.st = &st;
-  P.registration = registration_applies(st);
-  P.cost = cost_in.empty() ? std::vector<double>(m.n_cols(), 1.0) : cost_in;
-  if (P.cost.size() != m.n_cols()) throw std::invalid_argument("exact_cover: one cost per column required");
-  for (double c : P.cost)
-    if (!(c > 0.0) || !std::isfinite(c)) throw std::invalid_argument("exact_cover: column costs must be finite and > 0");
-  rep.columns = m.n_cols();
-
-  // Warm start and answer of record: greedy (constrained when registration applies), redundancy-eliminated.
-  CoverSettings gs = st;
-  gs.mode = P.registration ? CoverMode::constrained : CoverMode::greedy;
-  gs.coverage_goal = 1.0;
-  gs.eliminate_redundant = true;
-  const CoverResult greedy = greedy_cover(m, w, gs);
-
-  P.cols_of.assign(m.n_rows, {});
-  for (std::uint32_t j = 0; j < m.n_cols(); ++j) m.columns[j].for_each([&](std::uint32_t r) { P.cols_of[r].push_back(j); });
-  std::vector<char> row_alive(m.n_rows, 0), col_alive(m.n_cols(), 1), forced(m.n_cols(), 0);
-  for (std::uint32_t r = 0; r < m.n_rows; ++r) row_alive[r] = !P.cols_of[r].empty();
-  rep.rows = static_cast<std::size_t>(std::count(row_alive.begin(), row_alive.end(), 1));
-  bool greedy_feasible = true;
-  {
-    std::vector<char> cov(m.n_rows, 0);
-    for (auto j : greedy.views) m.columns[j].for_each([&](std::uint32_t r) { cov[r] = 1; });
-    for (std::uint32_t r = 0; r < m.n_rows; ++r) greedy_feasible &= !row_alive[r] || cov[r];
-    greedy_feasible &= !P.registration || greedy.registration_components <= 1;
+/// What presolve leaves: the live rows and columns, the columns forced in, and for each dominated column one
+/// that covers its rows at no more cost.
+struct Reduction {
+  std::vector<char> row_alive, col_alive, forced;
+  std::vector<std::int64_t> dominator;  // dropped column -> a column covering its rows, -1
+  /// Column j as the reduced problem knows it: itself, or the column that dominated it.
+  std::int64_t reduced_column(std::uint32_t j0) const {
+    std::int64_t j = j0;
+    while (j >= 0 && !col_alive[j] && !forced[j]) j = dominator[j];
+    return j;
   }
-  if (greedy_feasible)
-    for (auto j : greedy.views) rep.greedy_objective += P.cost[j];
+};
 
-  // ---- presolve ----
-  std::vector<std::int64_t> dominator(m.n_cols(), -1);  // dropped column -> a column covering its rows
+/// Presolve (rounds until nothing changes): forced columns, identical rows, row dominance, and column
+/// dominance where no registration constraint ties columns together. Bounded by a work budget.
+void presolve(const Problem& P, Reduction& red, ExactReport& rep) {
+  const MeasurabilityMatrix& m = *P.m;
   const std::uint64_t budget = 400'000'000;
   std::uint64_t work = 0;
   auto alive_cols = [&](std::uint32_t r) {
     std::vector<std::uint32_t> out;
     for (auto j : P.cols_of[r])
-      if (col_alive[j]) out.push_back(j);
+      if (red.col_alive[j]) out.push_back(j);
     return out;
   };
   for (int round = 0; round < 8; ++round) {
     bool changed = false;
     // Forced columns: the only cover of some row.
     for (std::uint32_t r = 0; r < m.n_rows; ++r) {
-      if (!row_alive[r]) continue;
+      if (!red.row_alive[r]) continue;
       const auto cs = alive_cols(r);
       if (cs.size() != 1) continue;
       const std::uint32_t j = cs.front();
-      forced[j] = 1;
-      col_alive[j] = 0;
+      red.forced[j] = 1;
+      red.col_alive[j] = 0;
       ++rep.forced_columns;
-      m.columns[j].for_each([&](std::uint32_t q) { row_alive[q] = 0; });
+      m.columns[j].for_each([&](std::uint32_t q) { red.row_alive[q] = 0; });
       changed = true;
     }
     // Identical rows.
     std::map<std::vector<std::uint32_t>, std::uint32_t> seen;
     std::vector<std::vector<std::uint32_t>> row_cols(m.n_rows);
     for (std::uint32_t r = 0; r < m.n_rows; ++r) {
-      if (!row_alive[r]) continue;
+      if (!red.row_alive[r]) continue;
       row_cols[r] = alive_cols(r);
       if (!seen.emplace(row_cols[r], r).second) {
-        row_alive[r] = 0;
+        red.row_alive[r] = 0;
         ++rep.merged_rows;
         changed = true;
       }
@@ -373,24 +346,24 @@ CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>&
     // Row dominance: cols(A) ⊆ cols(B) makes B redundant. Candidates B share A's rarest column.
     std::vector<std::vector<std::uint32_t>> rows_of_col(m.n_cols());
     for (std::uint32_t r = 0; r < m.n_rows; ++r)
-      if (row_alive[r])
+      if (red.row_alive[r])
         for (auto j : row_cols[r]) rows_of_col[j].push_back(r);
     std::vector<std::uint32_t> order;
     for (std::uint32_t r = 0; r < m.n_rows; ++r)
-      if (row_alive[r]) order.push_back(r);
+      if (red.row_alive[r]) order.push_back(r);
     std::sort(order.begin(), order.end(), [&](auto a, auto b) {
       return row_cols[a].size() != row_cols[b].size() ? row_cols[a].size() < row_cols[b].size() : a < b;
     });
     for (auto a : order) {
-      if (!row_alive[a] || work > budget) continue;
+      if (!red.row_alive[a] || work > budget) continue;
       std::uint32_t rare = row_cols[a].front();
       for (auto j : row_cols[a])
         if (rows_of_col[j].size() < rows_of_col[rare].size()) rare = j;
       for (auto b : rows_of_col[rare]) {
-        if (b == a || !row_alive[b] || row_cols[b].size() < row_cols[a].size()) continue;
+        if (b == a || !red.row_alive[b] || row_cols[b].size() < row_cols[a].size()) continue;
         work += row_cols[a].size() + row_cols[b].size();
         if (std::includes(row_cols[b].begin(), row_cols[b].end(), row_cols[a].begin(), row_cols[a].end())) {
-          row_alive[b] = 0;
+          red.row_alive[b] = 0;
           ++rep.dominated_rows;
           changed = true;
         }
@@ -400,13 +373,13 @@ CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>&
     if (!P.registration) {
       std::vector<std::vector<std::uint32_t>> col_rows(m.n_cols());
       for (std::uint32_t r = 0; r < m.n_rows; ++r)
-        if (row_alive[r])
+        if (red.row_alive[r])
           for (auto j : P.cols_of[r])
-            if (col_alive[j]) col_rows[j].push_back(r);
+            if (red.col_alive[j]) col_rows[j].push_back(r);
       for (std::uint32_t j = 0; j < m.n_cols(); ++j) {
-        if (!col_alive[j]) continue;
+        if (!red.col_alive[j]) continue;
         if (col_rows[j].empty()) {
-          col_alive[j] = 0;  // covers nothing that is left
+          red.col_alive[j] = 0;  // covers nothing that is left
           continue;
         }
         if (work > budget) continue;
@@ -414,13 +387,13 @@ CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>&
         for (auto r : col_rows[j])
           if (row_cols[r].size() < row_cols[rare].size()) rare = r;
         for (auto k : P.cols_of[rare]) {
-          if (k == j || !col_alive[k] || P.cost[k] > P.cost[j] || col_rows[k].size() < col_rows[j].size()) continue;
+          if (k == j || !red.col_alive[k] || P.cost[k] > P.cost[j] || col_rows[k].size() < col_rows[j].size()) continue;
           const bool same = col_rows[k].size() == col_rows[j].size() && P.cost[k] == P.cost[j];
           if (same && k > j) continue;  // identical twins: keep the lower index
           work += col_rows[j].size() + col_rows[k].size();
           if (std::includes(col_rows[k].begin(), col_rows[k].end(), col_rows[j].begin(), col_rows[j].end())) {
-            col_alive[j] = 0;
-            dominator[j] = k;
+            red.col_alive[j] = 0;
+            red.dominator[j] = k;
             ++rep.dominated_columns;
             changed = true;
             break;
@@ -432,19 +405,23 @@ CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>&
   }
   rep.dominance_budget_hit = work > budget;
 
-  // ---- the program ----
+}
+
+/// The integer program over what presolve left (P.ilp_col, P.rows, P.forced).
+void build_program(Problem& P, const Reduction& red, ExactReport& rep) {
+  const MeasurabilityMatrix& m = *P.m;
   P.ilp_of.assign(m.n_cols(), -1);
   for (std::uint32_t j = 0; j < m.n_cols(); ++j) {
-    if (forced[j]) {
+    if (red.forced[j]) {
       P.forced.push_back(j);
       P.forced_cost += P.cost[j];
-    } else if (col_alive[j]) {
+    } else if (red.col_alive[j]) {
       P.ilp_of[j] = static_cast<std::int64_t>(P.ilp_col.size());
       P.ilp_col.push_back(j);
     }
   }
   for (std::uint32_t r = 0; r < m.n_rows; ++r) {
-    if (!row_alive[r]) continue;
+    if (!red.row_alive[r]) continue;
     std::vector<int> row;
     for (auto j : P.cols_of[r])
       if (P.ilp_of[j] >= 0) row.push_back(static_cast<int>(P.ilp_of[j]));
@@ -453,7 +430,10 @@ CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>&
   rep.rows_after_presolve = P.rows.size();
   rep.columns_after_presolve = P.ilp_col.size();
 
-  // Lower bound that needs no solver: rows with pairwise disjoint covers each need their own column.
+}
+
+/// A lower bound that needs no solver: rows with pairwise disjoint covers each need their own column.
+void disjoint_rows_bound(const Problem& P, ExactReport& rep) {
   {
     std::vector<char> used(P.ilp_col.size(), 0);
     std::vector<std::size_t> order(P.rows.size());
@@ -471,6 +451,11 @@ CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>&
     rep.bound = P.forced_cost + lb;
   }
 
+}
+
+/// The Lagrangian bound and, on large instances, the core problem (below).
+void lagrangian_bound_and_core(Problem& P, const Reduction& red, const CoverResult& greedy, const CoverSettings& st,
+                               Clock::time_point t0, ExactReport& rep) {
   // Lagrangian bound (subgradient on the row constraints): close to the LP bound at a fraction of the root
   // LP's cost, and valid whatever CBC manages before the time limit. A quarter of the limit at most.
   if (!P.rows.empty()) {
@@ -538,8 +523,7 @@ CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>&
         for (std::size_t i = 0; i < k; ++i) in_core[byc[i]] = 1;
       }
       for (auto j0 : greedy.views) {
-        std::int64_t j = j0;
-        while (j >= 0 && !col_alive[j] && !forced[j]) j = dominator[j];
+        const std::int64_t j = red.reduced_column(j0);
         if (j >= 0 && P.ilp_of[j] >= 0) in_core[P.ilp_of[j]] = 1;
       }
       std::vector<std::uint32_t> core_cols;
@@ -559,17 +543,139 @@ CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>&
       P.core = true;
     }
   }
+}
 
-  // Warm start in the reduced space: greedy's views, a dropped view replaced by its dominator.
-  if (greedy_feasible) {
-    P.warm.assign(P.ilp_col.size(), 0.0);
-    for (auto j0 : greedy.views) {
-      std::int64_t j = j0;
-      while (j >= 0 && !col_alive[j] && !forced[j]) j = dominator[j];
-      if (j >= 0 && P.ilp_of[j] >= 0) P.warm[P.ilp_of[j]] = 1.0;
-    }
-    if (!P.covers_all(P.warm.data())) P.warm.clear();  // cannot happen; never hand CBC a wrong start
+/// Warm start in the reduced space: greedy's views, a dropped view replaced by its dominator.
+void warm_start(Problem& P, const Reduction& red, const CoverResult& greedy) {
+  P.warm.assign(P.ilp_col.size(), 0.0);
+  for (auto j0 : greedy.views) {
+    const std::int64_t j = red.reduced_column(j0);
+    if (j >= 0 && P.ilp_of[j] >= 0) P.warm[P.ilp_of[j]] = 1.0;
   }
+  if (!P.covers_all(P.warm.data())) P.warm.clear();  // cannot happen; never hand CBC a wrong start
+}
+
+/// Runs CBC in a forked worker until it ends or the deadline passes, taking every improving cover it reports;
+/// returns how it ended. The worker is killed at the deadline (CBC's own limit is not trusted to hold).
+std::string solve_in_worker(const Problem& P, Clock::time_point deadline, ExactReport& rep,
+                            const std::function<void(std::vector<std::uint32_t>, double)>& take) {
+  std::string end_status;
+  int fds[2];
+  if (::pipe(fds) != 0) throw std::runtime_error(std::string("exact_cover: pipe: ") + std::strerror(errno));
+  std::fflush(nullptr);
+  const pid_t pid = ::fork();
+  if (pid < 0) {
+    ::close(fds[0]);
+    ::close(fds[1]);
+    throw std::runtime_error(std::string("exact_cover: fork: ") + std::strerror(errno));
+  }
+  if (pid == 0) {
+    ::close(fds[0]);
+    run_worker(P, fds[1], deadline);
+  }
+  ::close(fds[1]);
+  std::string buf;
+  bool done = false;
+  auto handle = [&](const std::string& line) {
+    std::istringstream in(line);
+    char kind = 0;
+    in >> kind;
+    if (kind == 'S') {
+      double obj = 0.0;
+      in >> obj;
+      std::vector<std::uint32_t> s;
+      for (std::uint32_t j; in >> j;) s.push_back(j);
+      take(std::move(s), obj);
+    } else if (kind == 'B') {
+      double b = 0.0;
+      in >> b;
+      if (!rep.core_columns) rep.bound = std::max(rep.bound, b);  // a core's bound says nothing of the whole
+    } else if (kind == 'C') {
+      in >> rep.connectivity_cuts;
+    } else if (kind == 'R') {
+      ++rep.solves;
+    } else if (kind == 'E') {
+      std::getline(in >> std::ws, end_status);
+      done = true;
+    }
+  };
+  while (!done) {
+    const double left_ms = std::chrono::duration<double, std::milli>(deadline - Clock::now()).count() + 250.0;
+    if (left_ms <= 0.0) break;
+    pollfd pfd{fds[0], POLLIN, 0};
+    const int pr = ::poll(&pfd, 1, static_cast<int>(std::min(left_ms, 1000.0)));
+    if (pr < 0 && errno == EINTR) continue;
+    if (pr <= 0) continue;
+    char chunk[65536];
+    const ssize_t n = ::read(fds[0], chunk, sizeof chunk);
+    if (n <= 0) break;  // worker exited (or died)
+    buf.append(chunk, static_cast<std::size_t>(n));
+    for (std::size_t nl; (nl = buf.find('\n')) != std::string::npos;) {
+      handle(buf.substr(0, nl));
+      buf.erase(0, nl + 1);
+    }
+  }
+  ::kill(pid, SIGKILL);
+  int status = 0;
+  while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  }
+  ::close(fds[0]);
+  if (end_status.empty()) end_status = done ? "time limit" : "time limit (solver stopped)";
+  return end_status;
+}
+
+}  // namespace
+
+CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>& w, const CoverSettings& st,
+                        const std::vector<double>& cost_in, ExactReport* report) {
+  const auto t0 = Clock::now();
+  if (w.size() != m.n_rows) throw std::invalid_argument("exact_cover: one weight per row required");
+  if (st.coverage_goal < 1.0 - 1e-12)
+    throw ConfigError("cover.mode exact covers every measurable row: the spec's coverage_goal must be 1");
+  ExactReport rep;
+  rep.solver = std::string("CBC ") + CBC_VERSION;
+  Problem P;
+  P.m = &m;
+  P.w = &w;
+  P.st = &st;
+  P.registration = registration_applies(st);
+  P.cost = cost_in.empty() ? std::vector<double>(m.n_cols(), 1.0) : cost_in;
+  if (P.cost.size() != m.n_cols()) throw std::invalid_argument("exact_cover: one cost per column required");
+  for (double c : P.cost)
+    if (!(c > 0.0) || !std::isfinite(c)) throw std::invalid_argument("exact_cover: column costs must be finite and > 0");
+  rep.columns = m.n_cols();
+
+  // Warm start and answer of record: greedy (constrained when registration applies), redundancy-eliminated.
+  CoverSettings gs = st;
+  gs.mode = P.registration ? CoverMode::constrained : CoverMode::greedy;
+  gs.coverage_goal = 1.0;
+  gs.eliminate_redundant = true;
+  const CoverResult greedy = greedy_cover(m, w, gs);
+
+  P.cols_of.assign(m.n_rows, {});
+  for (std::uint32_t j = 0; j < m.n_cols(); ++j) m.columns[j].for_each([&](std::uint32_t r) { P.cols_of[r].push_back(j); });
+  Reduction red;
+  red.row_alive.assign(m.n_rows, 0);
+  red.col_alive.assign(m.n_cols(), 1);
+  red.forced.assign(m.n_cols(), 0);
+  red.dominator.assign(m.n_cols(), -1);
+  for (std::uint32_t r = 0; r < m.n_rows; ++r) red.row_alive[r] = !P.cols_of[r].empty();
+  rep.rows = static_cast<std::size_t>(std::count(red.row_alive.begin(), red.row_alive.end(), 1));
+  bool greedy_feasible = true;
+  {
+    std::vector<char> cov(m.n_rows, 0);
+    for (auto j : greedy.views) m.columns[j].for_each([&](std::uint32_t r) { cov[r] = 1; });
+    for (std::uint32_t r = 0; r < m.n_rows; ++r) greedy_feasible &= !red.row_alive[r] || cov[r];
+    greedy_feasible &= !P.registration || greedy.registration_components <= 1;
+  }
+  if (greedy_feasible)
+    for (auto j : greedy.views) rep.greedy_objective += P.cost[j];
+
+  presolve(P, red, rep);
+  build_program(P, red, rep);
+  disjoint_rows_bound(P, rep);
+  lagrangian_bound_and_core(P, red, greedy, st, t0, rep);
+  if (greedy_feasible) warm_start(P, red, greedy);
 
   std::vector<std::uint32_t> best_set = greedy_feasible ? greedy.views : std::vector<std::uint32_t>{};
   double best_obj = greedy_feasible ? rep.greedy_objective : 1e300;
@@ -588,67 +694,7 @@ CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>&
     take(P.forced, P.forced_cost);
     end_status = "optimal";
   } else {
-    int fds[2];
-    if (::pipe(fds) != 0) throw std::runtime_error(std::string("exact_cover: pipe: ") + std::strerror(errno));
-    std::fflush(nullptr);
-    const pid_t pid = ::fork();
-    if (pid < 0) {
-      ::close(fds[0]);
-      ::close(fds[1]);
-      throw std::runtime_error(std::string("exact_cover: fork: ") + std::strerror(errno));
-    }
-    if (pid == 0) {
-      ::close(fds[0]);
-      run_worker(P, fds[1], deadline);
-    }
-    ::close(fds[1]);
-    std::string buf;
-    bool done = false;
-    auto handle = [&](const std::string& line) {
-      std::istringstream in(line);
-      char kind = 0;
-      in >> kind;
-      if (kind == 'S') {
-        double obj = 0.0;
-        in >> obj;
-        std::vector<std::uint32_t> s;
-        for (std::uint32_t j; in >> j;) s.push_back(j);
-        take(std::move(s), obj);
-      } else if (kind == 'B') {
-        double b = 0.0;
-        in >> b;
-        if (!rep.core_columns) rep.bound = std::max(rep.bound, b);  // a core's bound says nothing of the whole
-      } else if (kind == 'C') {
-        in >> rep.connectivity_cuts;
-      } else if (kind == 'R') {
-        ++rep.solves;
-      } else if (kind == 'E') {
-        std::getline(in >> std::ws, end_status);
-        done = true;
-      }
-    };
-    while (!done) {
-      const double left_ms = std::chrono::duration<double, std::milli>(deadline - Clock::now()).count() + 250.0;
-      if (left_ms <= 0.0) break;
-      pollfd pfd{fds[0], POLLIN, 0};
-      const int pr = ::poll(&pfd, 1, static_cast<int>(std::min(left_ms, 1000.0)));
-      if (pr < 0 && errno == EINTR) continue;
-      if (pr <= 0) continue;
-      char chunk[65536];
-      const ssize_t n = ::read(fds[0], chunk, sizeof chunk);
-      if (n <= 0) break;  // worker exited (or died)
-      buf.append(chunk, static_cast<std::size_t>(n));
-      for (std::size_t nl; (nl = buf.find('\n')) != std::string::npos;) {
-        handle(buf.substr(0, nl));
-        buf.erase(0, nl + 1);
-      }
-    }
-    ::kill(pid, SIGKILL);
-    int status = 0;
-    while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
-    }
-    ::close(fds[0]);
-    if (end_status.empty()) end_status = done ? "time limit" : "time limit (solver stopped)";
+    end_status = solve_in_worker(P, deadline, rep, take);
   }
 
   if (rep.core_columns && end_status == "optimal") end_status = "optimal on the core problem";
