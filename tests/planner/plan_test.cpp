@@ -34,11 +34,7 @@ nlohmann::json plan_without_times(const ViewPlan& p) {
   return j;
 }
 
-TriangleMesh mushroom_mm() {
-  TriangleMesh m = load_mesh(testing::source_path("tests/data/mushroom.off"));
-  apply_scale(m, fit_scale(m, 200.0));
-  return m;
-}
+TriangleMesh mushroom_mm() { return testing::test_mesh_mm("mushroom.off"); }
 
 TEST(Plan, IdenticalForIdenticalInputsAndSeedAcrossThreadCounts) {
   RoughModelOptions o;

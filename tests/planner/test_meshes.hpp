@@ -12,6 +12,13 @@ inline std::string source_path(const std::string& rel) { return std::string(SCAN
 inline SensorModel thesis_sensor() { return load_sensor(source_path("config/sensors/line-scan-thesis.yaml")); }
 inline ModelSpec thesis_spec() { return load_spec(source_path("config/spec/thesis.yaml")); }
 
+/// A committed mesh (tests/data/NAME) scaled so that its longest bounding-box side is `longest_mm`.
+inline TriangleMesh test_mesh_mm(const std::string& name, double longest_mm = 200.0) {
+  TriangleMesh m = load_mesh(source_path("tests/data/" + name));
+  apply_scale(m, fit_scale(m, longest_mm));
+  return m;
+}
+
 /// Appends a planar grid: origin + i·step·u + j·step·v for i < nu, j < nv; triangles wound so that
 /// (u × v) is the front (normal) side.
 inline void add_grid(TriangleMesh& m, const Eigen::Vector3d& origin, const Eigen::Vector3d& u, const Eigen::Vector3d& v,

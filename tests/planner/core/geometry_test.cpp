@@ -173,8 +173,7 @@ TEST(Geometry, CandidatesInsideOrTooCloseAreDropped) {
 }
 
 TEST(Geometry, CulledMatrixEqualsNaiveAllPairs) {
-  TriangleMesh m = load_mesh(testing::source_path("tests/data/mushroom.off"));
-  apply_scale(m, fit_scale(m, 200.0));
+  const TriangleMesh m = testing::test_mesh_mm("mushroom.off");
   RoughModelOptions o;
   o.target_vertices = 400;
   const RoughModel rm = build_rough_model(m, o);

@@ -171,8 +171,7 @@ TEST(RoughModel, AreaWeightedNormalsAndAreasOfAFlatPatch) {
 }
 
 TEST(RoughModel, DecimatesToTargetAndRhoRel) {
-  TriangleMesh m = load_mesh(testing::source_path("tests/data/mushroom.off"));
-  apply_scale(m, fit_scale(m, 200.0));
+  const TriangleMesh m = testing::test_mesh_mm("mushroom.off");
   RoughModelOptions o;
   o.target_vertices = 500;
   RoughModelReport r;

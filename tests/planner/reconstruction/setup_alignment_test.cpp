@@ -69,11 +69,7 @@ SetupAlignmentOptions table_axis(const TwoSetups& s) {
   return o;
 }
 
-TriangleMesh elephant_mm() {
-  TriangleMesh m = load_mesh(testing::source_path("tests/data/elephant.off"));
-  apply_scale(m, fit_scale(m, 200.0));
-  return m;
-}
+TriangleMesh elephant_mm() { return testing::test_mesh_mm("elephant.off"); }
 
 TEST(SetupAlignment, APlacementErrorOf10mmAnd15DegIsUndoneTo50Microns) {
   const TwoSetups s = two_setups(elephant_mm());
