@@ -93,7 +93,7 @@ for _ in $(seq 400); do
   now=$("$BUILD/daemon/scancelld" --check "$W/data" | grep -o '"scans":[0-9]*' | cut -d: -f2)
   [ "$now" -gt "$stored" ] && break; sleep 0.05
 done
-[ "$now" -gt "$stored" ] || fail "the resumed job stored no further view"
+[ "$now" -gt "$stored" ] || fail "the resumed job stored no further view in 20 s ($stored scans before the pause, '$now' now); its status: $(ctl status 1 | tr -d '\n' | cut -c1-600); the cell: $(ctl status | tr -d '\n' | cut -c1-800)"
 ctl abort 1 > /dev/null || fail "abort"
 ctl watch 1 > "$W/watch2.log"; rc=$?
 [ $rc = 11 ] || fail "watch after abort: exit $rc, want 11 (aborted)"
