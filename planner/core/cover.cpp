@@ -59,99 +59,146 @@ double shared_weight(const MeasurabilityColumn& a, const MeasurabilityColumn& b,
   return shared;
 }
 
-CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>& w, const CoverSettings& st) {
-  if (w.size() != m.n_rows) throw std::invalid_argument("greedy_cover: one weight per row required");
-  CoverResult res;
-  const double total = fill_unmeasurable(m, w, res);
-  std::vector<double> col_weight(m.n_cols(), 0.0);
-  for (std::uint32_t j = 0; j < m.n_cols(); ++j) {
-    m.columns[j].for_each([&](std::uint32_t r) { col_weight[j] += w[r]; });
-    res.max_column_count = std::max(res.max_column_count, m.columns[j].count());
-    res.max_column_weight = std::max(res.max_column_weight, col_weight[j]);
+namespace {
+
+/// Greedy set cover of M by gain (thesis 4.3), with lazy gains in a heap, and the registration constraint
+/// (eq. 4.2, thesis 4.4.3) checked lazily: only for candidates that reach the top of the heap.
+class Greedy {
+ public:
+  Greedy(const MeasurabilityMatrix& m, const std::vector<double>& w, const CoverSettings& st)
+      : m_(m), w_(w), st_(st), covered_(m.n_rows, 0), chosen_(m.n_cols(), 0), constrained_(registration_applies(st)),
+        registrable_(m.n_cols(), constrained_ ? 0 : 1), checked_upto_(constrained_ ? m.n_cols() : 0, 0),
+        col_weight_(m.n_cols(), 0.0) {
+    total_ = fill_unmeasurable(m, w, res_);
+    for (std::uint32_t j = 0; j < m.n_cols(); ++j) {
+      m.columns[j].for_each([&](std::uint32_t r) { col_weight_[j] += w[r]; });
+      res_.max_column_count = std::max(res_.max_column_count, m.columns[j].count());
+      res_.max_column_weight = std::max(res_.max_column_weight, col_weight_[j]);
+    }
+    for (std::uint32_t j = 0; j < m.n_cols(); ++j) {
+      const double g = gain_of(j);
+      if (g > 0.0) heap_.push({g, j, 0});
+    }
   }
 
-  std::vector<char> covered(m.n_rows, 0);
-  std::vector<char> chosen(m.n_cols(), 0);
-  double covered_w = 0.0;
-  std::size_t covered_n = 0;
-  const bool constrained = registration_applies(st);
-  // Registrability (eq. 4.2) is checked lazily, only for candidates that reach the top of the heap: a
-  // candidate's overlap with each chosen view is counted once (checked_upto), and once it registers it stays
-  // registrable. A row -> columns index would do it eagerly but doubles peak memory on whole objects.
-  std::vector<char> registrable(m.n_cols(), constrained ? 0 : 1);
-  std::vector<std::uint32_t> checked_upto(constrained ? m.n_cols() : 0, 0);
-  // σ_kj = shared weight / normaliser(k, j); σ_kj ≥ t_r  <=>  shared ≥ t_r · normaliser(k, j).
-  auto normaliser = [&](std::uint32_t a, std::uint32_t b) {
-    return st.normalizer == RegistrationNormalizer::max_view ? res.max_column_weight : std::min(col_weight[a], col_weight[b]);
-  };
-  auto needed = [&](std::uint32_t a, std::uint32_t b) { return st.registration_threshold * normaliser(a, b); };
-  auto sigma = [&](std::uint32_t a, std::uint32_t b) {
-    const double norm = normaliser(a, b);
-    return norm > 0.0 ? shared_weight(m.columns[a], m.columns[b], w) / norm : 0.0;
-  };
-  auto registers = [&](std::uint32_t j) {
-    if (registrable[j]) return true;
-    for (std::uint32_t k = checked_upto[j]; k < res.views.size(); ++k) {
-      const double shared = shared_weight(m.columns[j], m.columns[res.views[k]], w);
-      if (shared > 0.0 && shared >= needed(j, res.views[k])) {
-        registrable[j] = 1;
+  /// Picks views until the coverage goal, the minimum gain, or nothing registrable is left.
+  CoverResult run() {
+    res_.stop_reason = "no candidate adds coverage";
+    while (true) {
+      if (total_ > 0 && covered_w_ / total_ >= st_.coverage_goal - 1e-12) {
+        res_.stop_reason = "coverage goal reached";
+        break;
+      }
+      bool picked = pick_best();
+      if (!picked && constrained_ && !waiting_.empty()) picked = bridge();
+      if (!picked) {
+        if (!waiting_.empty()) res_.stop_reason = "remaining gain needs views that cannot register (t_r)";
         break;
       }
     }
-    checked_upto[j] = static_cast<std::uint32_t>(res.views.size());
-    return registrable[j] != 0;
-  };
+    return res_;
+  }
 
-  auto gain_of = [&](std::uint32_t j) {
+  /// σ_kj = shared weight / normaliser(k, j) (eq. 4.2).
+  double sigma(std::uint32_t a, std::uint32_t b) const {
+    const double norm = normaliser(a, b);
+    return norm > 0.0 ? shared_weight(m_.columns[a], m_.columns[b], w_) / norm : 0.0;
+  }
+
+ private:
+  double normaliser(std::uint32_t a, std::uint32_t b) const {
+    return st_.normalizer == RegistrationNormalizer::max_view ? res_.max_column_weight : std::min(col_weight_[a], col_weight_[b]);
+  }
+  // σ_kj ≥ t_r  <=>  shared ≥ t_r · normaliser(k, j).
+  double needed(std::uint32_t a, std::uint32_t b) const { return st_.registration_threshold * normaliser(a, b); }
+
+  // A candidate's overlap with each chosen view is counted once (checked_upto), and once it registers it stays
+  // registrable. A row -> columns index would do it eagerly but doubles peak memory on whole objects.
+  bool registers(std::uint32_t j) {
+    if (registrable_[j]) return true;
+    for (std::uint32_t k = checked_upto_[j]; k < res_.views.size(); ++k) {
+      const double shared = shared_weight(m_.columns[j], m_.columns[res_.views[k]], w_);
+      if (shared > 0.0 && shared >= needed(j, res_.views[k])) {
+        registrable_[j] = 1;
+        break;
+      }
+    }
+    checked_upto_[j] = static_cast<std::uint32_t>(res_.views.size());
+    return registrable_[j] != 0;
+  }
+
+  double gain_of(std::uint32_t j) const {
     double g = 0.0;
-    m.columns[j].for_each([&](std::uint32_t r) {
-      if (!covered[r]) g += w[r];
+    m_.columns[j].for_each([&](std::uint32_t r) {
+      if (!covered_[r]) g += w_[r];
     });
     return g;
-  };
-
-  std::priority_queue<Entry> heap;
-  for (std::uint32_t j = 0; j < m.n_cols(); ++j) {
-    const double g = gain_of(j);
-    if (g > 0.0) heap.push({g, j, 0});
   }
-  std::vector<Entry> waiting;  // fresh-best candidates that cannot register yet
 
-  auto select = [&](std::uint32_t col, double gain) {
-    chosen[col] = 1;
-    res.views.push_back(col);
-    res.gain_weight.push_back(gain);
-    m.columns[col].for_each([&](std::uint32_t r) {
-      if (!covered[r]) {
-        covered[r] = 1;
-        covered_w += w[r];
-        ++covered_n;
+  void select(std::uint32_t col, double gain) {
+    chosen_[col] = 1;
+    res_.views.push_back(col);
+    res_.gain_weight.push_back(gain);
+    m_.columns[col].for_each([&](std::uint32_t r) {
+      if (!covered_[r]) {
+        covered_[r] = 1;
+        covered_w_ += w_[r];
+        ++covered_n_;
       }
     });
-    res.cumulative_fraction.push_back(total > 0 ? covered_w / total : 0.0);
-    res.cumulative_point_fraction.push_back(m.n_rows ? static_cast<double>(covered_n) / m.n_rows : 0.0);
-    if (constrained) {
+    res_.cumulative_fraction.push_back(total_ > 0 ? covered_w_ / total_ : 0.0);
+    res_.cumulative_point_fraction.push_back(m_.n_rows ? static_cast<double>(covered_n_) / m_.n_rows : 0.0);
+    if (constrained_) {
       // Waiting candidates return to the heap; their gains are now stale upper bounds, and the new view may
       // be the one they register with.
-      for (auto& wentry : waiting) heap.push(wentry);
-      waiting.clear();
+      for (auto& wentry : waiting_) heap_.push(wentry);
+      waiting_.clear();
     }
-  };
+  }
+
+  /// The best fresh candidate that registers, selected; false when none is left above the minimum gain.
+  bool pick_best() {
+    const std::uint32_t stamp = static_cast<std::uint32_t>(res_.views.size());
+    while (!heap_.empty()) {
+      Entry e = heap_.top();
+      heap_.pop();
+      if (e.stamp != stamp) {  // stale: recompute, gains only shrink
+        e.gain = gain_of(e.col);
+        e.stamp = stamp;
+        if (e.gain > 0.0) heap_.push(e);
+        continue;
+      }
+      if (e.gain < st_.min_view_gain) {
+        res_.stop_reason = "the best remaining view gains under the minimum (cover.min_view_gain_mm2)";
+        heap_ = {};
+        waiting_.clear();
+        return false;
+      }
+      if (!res_.views.empty() && !registers(e.col)) {
+        ++res_.blocked_by_registration;
+        waiting_.push_back(e);
+        continue;
+      }
+      select(e.col, e.gain);
+      return true;
+    }
+    return false;
+  }
 
   // When every candidate that still adds coverage is too far from the plan to register, add a bridge: a
   // view that registers with the plan and overlaps one of the best waiting candidates by t_r, preferring
   // the bridge that itself gains most. Without it the thesis' constrained greedy stalls on objects whose
   // large flat faces leave little overlap (fandisk: 8 views, 27 % measured).
-  auto bridge = [&]() -> bool {
-    std::vector<Entry> best = waiting;
+  bool bridge() {
+    std::vector<Entry> best = waiting_;
     std::sort(best.begin(), best.end(), [](const Entry& a, const Entry& b) { return b < a; });
     if (best.size() > 4) best.resize(4);
     for (const Entry& target : best) {
       std::int64_t pick = -1;
       double pick_gain = -1.0, pick_shared = -1.0;
-      for (std::uint32_t j = 0; j < m.n_cols(); ++j) {
-        if (chosen[j] || j == target.col) continue;
-        const double sh = shared_weight(m.columns[j], m.columns[target.col], w);
+      for (std::uint32_t j = 0; j < m_.n_cols(); ++j) {
+        if (chosen_[j] || j == target.col) continue;
+        const double sh = shared_weight(m_.columns[j], m_.columns[target.col], w_);
         if (sh <= 0.0 || sh < needed(j, target.col) || !registers(j)) continue;
         const double g = gain_of(j);
         if (g > pick_gain || (g == pick_gain && sh > pick_shared)) {
@@ -162,52 +209,34 @@ CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>
       }
       if (pick >= 0) {
         select(static_cast<std::uint32_t>(pick), pick_gain);
-        ++res.bridge_views;
+        ++res_.bridge_views;
         return true;
       }
     }
     return false;
-  };
-
-  res.stop_reason = "no candidate adds coverage";
-  while (true) {
-    if (total > 0 && covered_w / total >= st.coverage_goal - 1e-12) {
-      res.stop_reason = "coverage goal reached";
-      break;
-    }
-    const std::uint32_t stamp = static_cast<std::uint32_t>(res.views.size());
-    bool picked = false;
-    while (!heap.empty()) {
-      Entry e = heap.top();
-      heap.pop();
-      if (e.stamp != stamp) {  // stale: recompute, gains only shrink
-        e.gain = gain_of(e.col);
-        e.stamp = stamp;
-        if (e.gain > 0.0) heap.push(e);
-        continue;
-      }
-      if (e.gain < st.min_view_gain) {
-        res.stop_reason = "the best remaining view gains under the minimum (cover.min_view_gain_mm2)";
-        heap = {};
-        waiting.clear();
-        break;
-      }
-      if (!res.views.empty() && !registers(e.col)) {
-        ++res.blocked_by_registration;
-        waiting.push_back(e);
-        continue;
-      }
-      select(e.col, e.gain);
-      picked = true;
-      break;
-    }
-    if (!picked && constrained && !waiting.empty()) picked = bridge();
-    if (!picked) {
-      if (!waiting.empty()) res.stop_reason = "remaining gain needs views that cannot register (t_r)";
-      break;
-    }
   }
 
+  const MeasurabilityMatrix& m_;
+  const std::vector<double>& w_;
+  const CoverSettings& st_;
+  CoverResult res_;
+  double total_ = 0.0, covered_w_ = 0.0;
+  std::size_t covered_n_ = 0;
+  std::vector<char> covered_, chosen_;
+  const bool constrained_;
+  std::vector<char> registrable_;
+  std::vector<std::uint32_t> checked_upto_;
+  std::vector<double> col_weight_;
+  std::priority_queue<Entry> heap_;
+  std::vector<Entry> waiting_;  // fresh-best candidates that cannot register yet
+};
+
+}  // namespace
+
+CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>& w, const CoverSettings& st) {
+  if (w.size() != m.n_rows) throw std::invalid_argument("greedy_cover: one weight per row required");
+  Greedy greedy(m, w, st);
+  CoverResult res = greedy.run();
   if (st.eliminate_redundant) {
     const auto kept = eliminate_redundant(m, w, st, res.views);
     const std::size_t removed = res.views.size() - kept.size();
@@ -225,7 +254,7 @@ CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>
   UnionFind uf(n);
   for (std::uint32_t a = 0; a < n; ++a)
     for (std::uint32_t b = a + 1; b < n; ++b) {
-      const double s = sigma(res.views[a], res.views[b]);
+      const double s = greedy.sigma(res.views[a], res.views[b]);
       if (s >= st.registration_threshold && s > 0.0) {
         res.registration_edges.push_back({a, b, s});
         uf.unite(a, b);
