@@ -264,146 +264,39 @@ void Daemon::publish_axes() {
   telemetry_->axes(m);
 }
 
+namespace {
+
+/// A control request's job, or a refusal naming the command and the id.
+JobRecord job_of(Journal& journal, const json& req, const std::string& cmd) {
+  const std::int64_t id = req["job"].get<std::int64_t>();
+  try {
+    return journal.job(id);
+  } catch (const JournalError&) {
+    throw std::invalid_argument(cmd + ": no job " + std::to_string(id));
+  }
+}
+
+json job_json(const JobRecord& j) {
+  json o = {{"job", j.id}, {"state", to_string(j.state)}, {"mesh", j.mesh_path}, {"cause", j.cause}};
+  if (!j.result_json.empty()) o["result"] = json::parse(j.result_json);
+  return o;
+}
+
+}  // namespace
+
 json Daemon::handle(const json& req, const std::function<bool(const json&)>& send) {
   const std::string cmd = req["cmd"];
-  if (cmd == "submit") {
-    JobRequest r;
-    r.mesh = client_file(req, "mesh", config_.allowed_dirs);
-    r.spec = client_file(req, "spec", config_.allowed_dirs);
-    r.settings = client_file(req, "settings", config_.allowed_dirs);
-    r.truth = client_file(req, "truth", config_.allowed_dirs);
-    r.fit_mm = req.value("fit_mm", 0.0);
-    if (req.contains("bbox_mm")) r.bbox_mm = Eigen::Vector3d(req["bbox_mm"][0].get<double>(), req["bbox_mm"][1].get<double>(), req["bbox_mm"][2].get<double>());
-    if (r.bbox_mm && r.mesh.empty() && r.truth.empty() && config_.scanner_driver == "sim")
-      throw std::invalid_argument("submit: a bounding-box job on the simulated scanner needs 'truth' (what stands on the table)");
-    if (req.contains("rough_vertices")) {
-      const auto n = req["rough_vertices"].get<std::int64_t>();
-      r.rough_vertices = static_cast<std::size_t>(std::max<std::int64_t>(n, 0));  // validate_request checks the range
-    }
-    r.placement = req.value("placement", std::string());
-    try {
-      validate_request(r, &shutting_down_);
-    } catch (const scancell::MeshError& e) {
-      throw std::invalid_argument(std::string("submit: mesh refused: ") + e.what());
-    } catch (const scancell::ConfigError& e) {
-      throw std::invalid_argument(std::string("submit: config refused: ") + without_content(e.what()));
-    }
-    const std::string what = r.bbox_mm ? "bbox:" + std::to_string(r.bbox_mm->x()) + "x" + std::to_string(r.bbox_mm->y()) + "x" +
-                                              std::to_string(r.bbox_mm->z())
-                                        : r.mesh;
-    const std::int64_t id = journal_->create_job(what, r.to_json().dump());
-    wake_.notify_all();
-    return {{"job", id}, {"state", "queued"}};
-  }
-  auto job_of = [&]() -> JobRecord {
-    const std::int64_t id = req["job"].get<std::int64_t>();
-    try {
-      return journal_->job(id);
-    } catch (const JournalError&) {
-      throw std::invalid_argument(cmd + ": no job " + std::to_string(id));
-    }
-  };
-  auto job_json = [&](const JobRecord& j) {
-    json o = {{"job", j.id}, {"state", to_string(j.state)}, {"mesh", j.mesh_path}, {"cause", j.cause}};
-    if (!j.result_json.empty()) o["result"] = json::parse(j.result_json);
-    return o;
-  };
-  if (cmd == "status") {
-    if (req.contains("job")) {
-      const JobRecord j = job_of();
-      json o = job_json(j);
-      std::lock_guard<std::mutex> lock(events_mu_);
-      if (last_.job == j.id) o["progress"] = progress_json(last_);
-      return o;
-    }
-    const std::int64_t cur = current_;
-    json o = {{"daemon", cur ? "busy" : "idle"}, {"job", cur}};
-    {
-      std::lock_guard<std::mutex> lock(config_mu_);
-      o["calibration"] = config_.calibration_applied;
-    }
-    std::lock_guard<std::mutex> lock(events_mu_);
-    if (cur && last_.job == cur) o["progress"] = progress_json(last_);
-    return o;
-  }
-  if (cmd == "record") {
-    // What a job did, from the journal: its events, and per plan round the views (axis targets, poses) and
-    // the stored scans (absolute paths; a note where one does not count). scancellctl export copies it out.
-    const JobRecord j = job_of();
-    json plans = json::array();
-    for (const auto& [plan, round] : journal_->plan_rounds(j.id)) {
-      json views = json::array(), scans = json::array();
-      for (const auto& v : journal_->views(plan)) views.push_back(json::parse(v.pose_json));
-      for (const auto& s : journal_->scans(plan))
-        scans.push_back({{"view", s.view}, {"file", (journal_->data_dir() / s.file).string()}, {"bytes", s.bytes}, {"note", s.note}});
-      plans.push_back({{"plan", plan}, {"round", round}, {"info", json::parse(journal_->plan_info(plan))}, {"views", views}, {"scans", scans}});
-    }
-    json o = job_json(j);
-    o["request"] = json::parse(j.request_json);
-    o["events"] = journal_->events(j.id);
-    o["plans"] = plans;
-    return o;
-  }
+  if (cmd == "submit") return submit(req);
+  if (cmd == "status") return status(req);
+  if (cmd == "record") return record(req);
   if (cmd == "list") {
     json a = json::array();
     for (const auto& j : journal_->jobs(100)) a.push_back(job_json(j));
     return {{"jobs", a}};
   }
-  if (cmd == "watch") {
-    const JobRecord j = job_of();
-    std::uint64_t seen = 0;
-    {
-      std::lock_guard<std::mutex> lock(events_mu_);
-      seen = next_seq_ - 1;
-      if (last_.job == j.id) send(progress_json(last_));
-    }
-    JobState state = j.state;
-    while (running_ && !ends_watch(state)) {
-      std::vector<Progress> fresh;
-      {
-        std::unique_lock<std::mutex> lock(events_mu_);
-        events_cv_.wait_for(lock, 250ms, [&] { return !running_ || (!events_.empty() && events_.back().first > seen); });
-        for (const auto& [seq, p] : events_)
-          if (seq > seen) {
-            seen = seq;
-            if (p.job == j.id) fresh.push_back(p);
-          }
-      }
-      for (const auto& p : fresh)
-        if (!send(progress_json(p))) return {{"job", j.id}, {"state", to_string(state)}};
-      state = journal_->job(j.id).state;
-    }
-    return job_json(journal_->job(j.id));
-  }
-  if (cmd == "pause" || cmd == "abort") {
-    std::lock_guard<std::mutex> claim(claim_mu_);  // see job_loop: the job is claimed, or not yet, not between
-    const JobRecord j = job_of();
-    if (current_ == j.id) {
-      stop_ = static_cast<int>(cmd == "pause" ? StopRequest::pause : StopRequest::abort);
-      return {{"job", j.id}, {"state", to_string(j.state)}, {"note", cmd + " at the next safe point (between moves or profiles)"}};
-    }
-    if (finished(j.state)) throw std::invalid_argument(cmd + ": job " + std::to_string(j.id) + " is already " + to_string(j.state));
-    if (cmd == "pause" && j.state != JobState::queued)
-      throw std::invalid_argument("pause: job " + std::to_string(j.id) + " is " + to_string(j.state) + ", not queued or running");
-    journal_->set_state(j.id, cmd == "pause" ? JobState::paused : JobState::aborted, "by request");
-    report({j.id, cmd == "pause" ? JobState::paused : JobState::aborted, 0, 0, 0, 0, 0, 0, std::string(cmd == "pause" ? "paused" : "aborted") + ": by request", "", ""});
-    return {{"job", j.id}, {"state", cmd == "pause" ? "paused" : "aborted"}};
-  }
-  if (cmd == "resume") {
-    const JobRecord j = job_of();
-    if (j.state != JobState::paused && j.state != JobState::faulted)
-      throw std::invalid_argument("resume: job " + std::to_string(j.id) + " is " + to_string(j.state) + ", not paused or faulted");
-    if (j.state == JobState::faulted) {
-      if (current_ != 0) throw std::invalid_argument("resume: job " + std::to_string(current_.load()) + " is running; resume the faulted job after it");
-      // The operator's resume is the authority to clear drive faults and the e-stop latch.
-      if (io_->interlock) io_->interlock->reset();  // refused while the e-stop is still pressed
-      else io_->positioner.reset_estop();
-      bring_up(*io_, config_.models.cell, config_.home_timeout);
-    }
-    journal_->set_state(j.id, JobState::queued, "resumed");
-    wake_.notify_all();
-    return {{"job", j.id}, {"state", "queued"}};
-  }
+  if (cmd == "watch") return watch(req, send);
+  if (cmd == "pause" || cmd == "abort") return pause_or_abort(req, cmd);
+  if (cmd == "resume") return resume(req);
   if (cmd == "calibrate") {
     const std::string kind = req["kind"].get<std::string>();
     check_calibration_kind(kind);
@@ -411,19 +304,147 @@ json Daemon::handle(const json& req, const std::function<bool(const json&)>& sen
     wake_.notify_all();
     return {{"job", id}, {"state", "queued"}, {"kind", kind}};
   }
-  if (cmd == "reload") {
-    std::lock_guard<std::mutex> lock(config_mu_);
-    std::vector<std::string> changes;
-    try {
-      changes = reload_calibration(config_);
-    } catch (const scancell::ConfigError& e) {
-      throw std::invalid_argument(std::string("reload refused, the previous calibration stays in force: ") + e.what());
-    }
-    std::lock_guard<std::mutex> tl(telemetry_mu_);
-    telemetry_->progress(0, changes.empty() ? "reload: no change" : "reload: " + std::to_string(changes.size()) + " changes");
-    return {{"changes", changes}, {"applies_to", "jobs started from now on"}};
-  }
+  if (cmd == "reload") return reload();
   throw std::invalid_argument("unknown command '" + cmd + "'");
+}
+
+json Daemon::submit(const json& req) {
+  JobRequest r;
+  r.mesh = client_file(req, "mesh", config_.allowed_dirs);
+  r.spec = client_file(req, "spec", config_.allowed_dirs);
+  r.settings = client_file(req, "settings", config_.allowed_dirs);
+  r.truth = client_file(req, "truth", config_.allowed_dirs);
+  r.fit_mm = req.value("fit_mm", 0.0);
+  if (req.contains("bbox_mm")) r.bbox_mm = Eigen::Vector3d(req["bbox_mm"][0].get<double>(), req["bbox_mm"][1].get<double>(), req["bbox_mm"][2].get<double>());
+  if (r.bbox_mm && r.mesh.empty() && r.truth.empty() && config_.scanner_driver == "sim")
+    throw std::invalid_argument("submit: a bounding-box job on the simulated scanner needs 'truth' (what stands on the table)");
+  if (req.contains("rough_vertices")) {
+    const auto n = req["rough_vertices"].get<std::int64_t>();
+    r.rough_vertices = static_cast<std::size_t>(std::max<std::int64_t>(n, 0));  // validate_request checks the range
+  }
+  r.placement = req.value("placement", std::string());
+  try {
+    validate_request(r, &shutting_down_);
+  } catch (const scancell::MeshError& e) {
+    throw std::invalid_argument(std::string("submit: mesh refused: ") + e.what());
+  } catch (const scancell::ConfigError& e) {
+    throw std::invalid_argument(std::string("submit: config refused: ") + without_content(e.what()));
+  }
+  const std::string what = r.bbox_mm ? "bbox:" + std::to_string(r.bbox_mm->x()) + "x" + std::to_string(r.bbox_mm->y()) + "x" +
+                                            std::to_string(r.bbox_mm->z())
+                                      : r.mesh;
+  const std::int64_t id = journal_->create_job(what, r.to_json().dump());
+  wake_.notify_all();
+  return {{"job", id}, {"state", "queued"}};
+}
+
+json Daemon::status(const json& req) {
+  if (req.contains("job")) {
+    const JobRecord j = job_of(*journal_, req, "status");
+    json o = job_json(j);
+    std::lock_guard<std::mutex> lock(events_mu_);
+    if (last_.job == j.id) o["progress"] = progress_json(last_);
+    return o;
+  }
+  const std::int64_t cur = current_;
+  json o = {{"daemon", cur ? "busy" : "idle"}, {"job", cur}};
+  {
+    std::lock_guard<std::mutex> lock(config_mu_);
+    o["calibration"] = config_.calibration_applied;
+  }
+  std::lock_guard<std::mutex> lock(events_mu_);
+  if (cur && last_.job == cur) o["progress"] = progress_json(last_);
+  return o;
+}
+
+/// What a job did, from the journal: its events, and per plan round the views (axis targets, poses) and
+/// the stored scans (absolute paths; a note where one does not count). scancellctl export copies it out.
+json Daemon::record(const json& req) {
+  const JobRecord j = job_of(*journal_, req, "record");
+  json plans = json::array();
+  for (const auto& [plan, round] : journal_->plan_rounds(j.id)) {
+    json views = json::array(), scans = json::array();
+    for (const auto& v : journal_->views(plan)) views.push_back(json::parse(v.pose_json));
+    for (const auto& s : journal_->scans(plan))
+      scans.push_back({{"view", s.view}, {"file", (journal_->data_dir() / s.file).string()}, {"bytes", s.bytes}, {"note", s.note}});
+    plans.push_back({{"plan", plan}, {"round", round}, {"info", json::parse(journal_->plan_info(plan))}, {"views", views}, {"scans", scans}});
+  }
+  json o = job_json(j);
+  o["request"] = json::parse(j.request_json);
+  o["events"] = journal_->events(j.id);
+  o["plans"] = plans;
+  return o;
+}
+
+json Daemon::watch(const json& req, const std::function<bool(const json&)>& send) {
+  const JobRecord j = job_of(*journal_, req, "watch");
+  std::uint64_t seen = 0;
+  {
+    std::lock_guard<std::mutex> lock(events_mu_);
+    seen = next_seq_ - 1;
+    if (last_.job == j.id) send(progress_json(last_));
+  }
+  JobState state = j.state;
+  while (running_ && !ends_watch(state)) {
+    std::vector<Progress> fresh;
+    {
+      std::unique_lock<std::mutex> lock(events_mu_);
+      events_cv_.wait_for(lock, 250ms, [&] { return !running_ || (!events_.empty() && events_.back().first > seen); });
+      for (const auto& [seq, p] : events_)
+        if (seq > seen) {
+          seen = seq;
+          if (p.job == j.id) fresh.push_back(p);
+        }
+    }
+    for (const auto& p : fresh)
+      if (!send(progress_json(p))) return {{"job", j.id}, {"state", to_string(state)}};
+    state = journal_->job(j.id).state;
+  }
+  return job_json(journal_->job(j.id));
+}
+
+json Daemon::pause_or_abort(const json& req, const std::string& cmd) {
+  std::lock_guard<std::mutex> claim(claim_mu_);  // see job_loop: the job is claimed, or not yet, not between
+  const JobRecord j = job_of(*journal_, req, cmd);
+  if (current_ == j.id) {
+    stop_ = static_cast<int>(cmd == "pause" ? StopRequest::pause : StopRequest::abort);
+    return {{"job", j.id}, {"state", to_string(j.state)}, {"note", cmd + " at the next safe point (between moves or profiles)"}};
+  }
+  if (finished(j.state)) throw std::invalid_argument(cmd + ": job " + std::to_string(j.id) + " is already " + to_string(j.state));
+  if (cmd == "pause" && j.state != JobState::queued)
+    throw std::invalid_argument("pause: job " + std::to_string(j.id) + " is " + to_string(j.state) + ", not queued or running");
+  journal_->set_state(j.id, cmd == "pause" ? JobState::paused : JobState::aborted, "by request");
+  report({j.id, cmd == "pause" ? JobState::paused : JobState::aborted, 0, 0, 0, 0, 0, 0, std::string(cmd == "pause" ? "paused" : "aborted") + ": by request", "", ""});
+  return {{"job", j.id}, {"state", cmd == "pause" ? "paused" : "aborted"}};
+}
+
+json Daemon::resume(const json& req) {
+  const JobRecord j = job_of(*journal_, req, "resume");
+  if (j.state != JobState::paused && j.state != JobState::faulted)
+    throw std::invalid_argument("resume: job " + std::to_string(j.id) + " is " + to_string(j.state) + ", not paused or faulted");
+  if (j.state == JobState::faulted) {
+    if (current_ != 0) throw std::invalid_argument("resume: job " + std::to_string(current_.load()) + " is running; resume the faulted job after it");
+    // The operator's resume is the authority to clear drive faults and the e-stop latch.
+    if (io_->interlock) io_->interlock->reset();  // refused while the e-stop is still pressed
+    else io_->positioner.reset_estop();
+    bring_up(*io_, config_.models.cell, config_.home_timeout);
+  }
+  journal_->set_state(j.id, JobState::queued, "resumed");
+  wake_.notify_all();
+  return {{"job", j.id}, {"state", "queued"}};
+}
+
+json Daemon::reload() {
+  std::lock_guard<std::mutex> lock(config_mu_);
+  std::vector<std::string> changes;
+  try {
+    changes = reload_calibration(config_);
+  } catch (const scancell::ConfigError& e) {
+    throw std::invalid_argument(std::string("reload refused, the previous calibration stays in force: ") + e.what());
+  }
+  std::lock_guard<std::mutex> tl(telemetry_mu_);
+  telemetry_->progress(0, changes.empty() ? "reload: no change" : "reload: " + std::to_string(changes.size()) + " changes");
+  return {{"changes", changes}, {"applies_to", "jobs started from now on"}};
 }
 
 int Daemon::run() {

@@ -42,6 +42,14 @@ class Daemon {
   void publish_status();
   void publish_axes();
   nlohmann::json progress_json(const Progress& p) const;
+  // The control commands (handle dispatches; docs/daemon.md lists them).
+  nlohmann::json submit(const nlohmann::json& req);
+  nlohmann::json status(const nlohmann::json& req);
+  nlohmann::json record(const nlohmann::json& req);
+  nlohmann::json watch(const nlohmann::json& req, const std::function<bool(const nlohmann::json&)>& send);
+  nlohmann::json pause_or_abort(const nlohmann::json& req, const std::string& cmd);
+  nlohmann::json resume(const nlohmann::json& req);
+  nlohmann::json reload();
   std::optional<std::int64_t> next_runnable();
 
   DaemonConfig config_;
