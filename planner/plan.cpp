@@ -239,14 +239,16 @@ MeasurabilityMatrix make_matrix(const Stage& s, const OcclusionScene& scene, con
                                     s.cancel, p.free_space_margin_applied ? &plain : nullptr);
   if (p.free_space_margin_applied) {
     std::vector<std::uint8_t> is_lost(p.rough.size(), 0), gained(p.rough.size(), 0);
-    for (auto r : matrix.unmeasurable_rows()) is_lost[r] = 1;
-    for (std::size_t j = 0; j < matrix.columns.size(); ++j) {
-      std::vector<std::uint32_t> rows = matrix.columns[j].rows();
-      const std::size_t before = rows.size();
+    const std::vector<std::uint32_t> lost = matrix.unmeasurable_rows();
+    for (auto r : lost) is_lost[r] = 1;
+    for (std::size_t j = 0; j < matrix.columns.size() && !lost.empty(); ++j) {
+      std::vector<std::uint32_t> add;
       plain.matrix.columns[j].for_each([&](std::uint32_t r) {
-        if (is_lost[r]) rows.push_back(r), gained[r] = 1;
+        if (is_lost[r]) add.push_back(r), gained[r] = 1;
       });
-      if (rows.size() == before) continue;
+      if (add.empty()) continue;  // most columns: left as they are, not copied
+      std::vector<std::uint32_t> rows = matrix.columns[j].rows();
+      rows.insert(rows.end(), add.begin(), add.end());
       std::sort(rows.begin(), rows.end());
       matrix.columns[j] = MeasurabilityColumn(std::move(rows), matrix.n_rows);
     }

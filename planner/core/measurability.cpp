@@ -98,6 +98,11 @@ struct TestLevel {
   }
 };
 
+/// Whether none of a pair's `n` occlusion rays (flags from OcclusionScene::occluded) is blocked.
+bool all_clear(const std::uint8_t* occluded, std::size_t n) {
+  return std::none_of(occluded, occluded + n, [](std::uint8_t o) { return o != 0; });
+}
+
 struct Counters {
   std::atomic<std::uint64_t> block_culled{0}, in_frustum{0}, surviving{0}, compliant{0}, rays{0}, measurable{0};
   void export_to(MatrixStats* stats, std::uint64_t total) const {
@@ -238,9 +243,7 @@ MeasurabilityMatrix build_measurability(const RoughModel& rough, const Occlusion
         extra_rays.clear();
         extra_rows.clear();
         for (std::size_t p = 0; p < pending.size(); ++p) {
-          bool clear = true;
-          for (std::size_t q = 0; q < wide_rays; ++q) clear &= !occ[wide_rays * p + q];
-          if (!clear) continue;
+          if (!all_clear(&occ[wide_rays * p], wide_rays)) continue;
           const Pending& e = pending[p];
           if (plain && !e.tight) plain_column.push_back(e.row);
           if (!e.tight) continue;
@@ -257,9 +260,7 @@ MeasurabilityMatrix build_measurability(const RoughModel& rough, const Occlusion
           scene.occluded(extra_rays.data(), extra_rays.size(), extra_occ.data());
           rays_cast += extra_rays.size();
           for (std::size_t p = 0; p < extra_rows.size(); ++p) {
-            bool clear = true;
-            for (std::size_t q = 0; q < 8; ++q) clear &= !extra_occ[8 * p + q];
-            if (clear)
+            if (all_clear(&extra_occ[8 * p], 8))
               column.push_back(extra_rows[p]);
             else if (plain)
               plain_column.push_back(extra_rows[p]);

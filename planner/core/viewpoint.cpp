@@ -170,25 +170,26 @@ std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const Occlus
   const int d_t = decoupled ? st.twist_levels : 1;
   const std::size_t by_decimation =
       decoupled ? std::max<std::size_t>(1, rough.size() / static_cast<std::size_t>(st.position_decimation)) : rough.size();
-  const double normal_weight_mm = sensor.optimal_standoff_mm * std::tan(0.5 * sensor.fov_x_rad);
+  // The footprint's half width at R_o: the position spacing's scale, the farthest-point sample's weight on
+  // normals, and the local patch's radius below.
+  const double r_o = sensor.optimal_standoff_mm;
+  const double footprint_half_x = r_o * std::tan(0.5 * sensor.fov_x_rad);
   std::size_t n_positions = by_decimation;
   if (decoupled && st.min_position_spacing_fraction > 0.0) {
     // The footprint, not the mesh, sets how finely positions need to be sampled: positions a few percent of
     // its width apart see nearly the same rows (a view's coverage varies slowly with its position).
-    const double spacing_mm = st.min_position_spacing_fraction * 2.0 * normal_weight_mm;
+    const double spacing_mm = st.min_position_spacing_fraction * 2.0 * footprint_half_x;
     const double area = std::accumulate(rough.area_mm2.begin(), rough.area_mm2.end(), 0.0);
     n_positions = std::min(n_positions, std::max<std::size_t>(1, static_cast<std::size_t>(std::ceil(area / (spacing_mm * spacing_mm)))));
   }
   rep.positions_by_decimation = by_decimation;
-  std::vector<std::uint32_t> target_rows = farthest_point_sample(rough, n_positions, normal_weight_mm);
+  std::vector<std::uint32_t> target_rows = farthest_point_sample(rough, n_positions, footprint_half_x);
   std::sort(target_rows.begin(), target_rows.end());  // candidate order follows the rows, not the sampling order
   std::vector<Eigen::Vector3d> target_normals;
   for (auto r : target_rows) target_normals.push_back(rough.normals[r]);
   rep.positions = target_rows.size();
 
-  const double r_o = sensor.optimal_standoff_mm;
   const double range_cap = std::min(sensor.range_max_mm, max_range_for_precision_mm(sensor, spec));
-  const double footprint_half_x = r_o * std::tan(0.5 * sensor.fov_x_rad);
   const double base_scan = design_scan_length_mm(sensor, spec, r_o * st.standoff_factor, st.scan_length_design_incidence_rad);
   const double half_y = sensor.kind == SensorKind::line_scan ? 0.5 * base_scan : r_o * std::tan(0.5 * sensor.fov_y_rad);
   const double patch_radius = std::hypot(footprint_half_x, half_y);
