@@ -1,5 +1,7 @@
 #include "planner/scan/range_image.hpp"
 
+#include <optional>
+
 #include <bit>
 #include <cmath>
 #include <cstdio>
@@ -20,26 +22,65 @@ std::size_t RangeImage::valid_count() const {
   return n;
 }
 
-double sample_density_per_mm2(const RangeImage& img, int i, int j) {
+SampleCell sample_cell(const RangeImage& img, int i, int j) {
+  SampleCell cell;
   const RangeSample& c = img.at(i, j);
-  if (!c.valid()) return 0.0;
-  auto chord = [&](int a, int b) {
-    if (a < 0 || b < 0 || a >= img.columns || b >= img.rows) return std::numeric_limits<double>::infinity();
+  if (!c.valid()) return cell;
+  const Eigen::Vector3d centre = c.object_mm.cast<double>();
+  // The chord to neighbour (a, b), or none when it lies outside the image or holds no sample.
+  auto chord = [&](int a, int b) -> std::optional<Eigen::Vector3d> {
+    if (a < 0 || b < 0 || a >= img.columns || b >= img.rows) return std::nullopt;
     const RangeSample& o = img.at(a, b);
-    return o.valid() ? static_cast<double>((o.object_mm - c.object_mm).norm()) : std::numeric_limits<double>::infinity();
+    if (!o.valid()) return std::nullopt;
+    return o.object_mm.cast<double>() - centre;
   };
   // The mean of the two chords (the minimum would be biased low by the range noise), unless one is a jump
   // (over twice the other): across a depth step the far side says nothing about this surface's sampling.
-  auto spacing = [](double a, double b) {
-    if (!std::isfinite(a) || !std::isfinite(b)) return std::min(a, b);
-    return std::max(a, b) > 2.0 * std::min(a, b) ? std::min(a, b) : 0.5 * (a + b);
+  // `before` points backwards, so the mean spacing vector is (after − before)/2; its length is the mean of the
+  // two chord lengths, as eq. 3.5-3.8 use them.
+  struct Spacing {
+    Eigen::Vector3d vector;
+    double length_mm;
   };
-  const double dx = spacing(chord(i - 1, j), chord(i + 1, j));
-  const double dy = spacing(chord(i, j - 1), chord(i, j + 1));
-  if (!std::isfinite(dx) || !std::isfinite(dy)) return 0.0;
-  const double d2 = dx * dx + dy * dy;
-  return d2 > 0.0 ? 1.0 / d2 : 0.0;
+  auto spacing = [](const std::optional<Eigen::Vector3d>& before, const std::optional<Eigen::Vector3d>& after) -> std::optional<Spacing> {
+    if (!before && !after) return std::nullopt;
+    if (!before) return Spacing{*after, after->norm()};
+    if (!after) return Spacing{-*before, before->norm()};
+    const double a = before->norm(), b = after->norm();
+    if (std::max(a, b) > 2.0 * std::min(a, b)) return a < b ? Spacing{-*before, a} : Spacing{*after, b};
+    return Spacing{0.5 * (*after - *before), 0.5 * (a + b)};
+  };
+  const auto along = spacing(chord(i - 1, j), chord(i + 1, j));
+  const auto across = spacing(chord(i, j - 1), chord(i, j + 1));
+  if (!along || !across) return cell;
+  cell.along_mm = along->vector;
+  cell.across_mm = across->vector;
+  cell.along_length_mm = along->length_mm;
+  cell.across_length_mm = across->length_mm;
+  cell.valid = along->length_mm * along->length_mm + across->length_mm * across->length_mm > 0.0;
+  return cell;
 }
+
+double SampleCell::density_per_mm2() const {
+  if (!valid) return 0.0;
+  // eq. 3.8 with δx, δy the chord lengths: ρ = 1/(δx² + δy²).
+  return 1.0 / (along_length_mm * along_length_mm + across_length_mm * across_length_mm);
+}
+
+bool SampleCell::contains(const Eigen::Vector3d& offset_mm, double reach) const {
+  if (!valid) return false;
+  // Least squares for offset ≈ a·along + b·across (the chords need not be orthogonal on an oblique surface).
+  const double aa = along_mm.squaredNorm(), bb = across_mm.squaredNorm(), ab = along_mm.dot(across_mm);
+  const double det = aa * bb - ab * ab;
+  if (!(det > 1e-12 * aa * bb)) return false;  // collinear chords: no area
+  const double pa = along_mm.dot(offset_mm), pb = across_mm.dot(offset_mm);
+  const double a = (bb * pa - ab * pb) / det, b = (aa * pb - ab * pa) / det;
+  if (std::abs(a) > reach || std::abs(b) > reach) return false;
+  const Eigen::Vector3d off_plane = offset_mm - a * along_mm - b * across_mm;
+  return off_plane.squaredNorm() <= 0.25 * std::max(aa, bb);
+}
+
+double sample_density_per_mm2(const RangeImage& img, int i, int j) { return sample_cell(img, i, j).density_per_mm2(); }
 
 // ---------------------------------------------------------------------------------------------------------
 // Range image files: binary little-endian PLY with the image's geometry in comments.

@@ -65,6 +65,25 @@ struct RangeImage {
 /// surface measurement).
 double sample_density_per_mm2(const RangeImage& image, int i, int j);
 
+/// The patch of surface sample (i, j) stands for: the parallelogram spanned by its chord vectors along the
+/// profile (`along_mm`) and across profiles (`across_mm`), centred on the sample, so that a grid of samples
+/// tiles the surface it measured and no more (a half chord past the last sample, not a whole spacing).
+/// Each chord is the same neighbour choice as sample_density_per_mm2 (the mean of both sides, or the nearer
+/// across a depth step). `valid` is false where sample_density_per_mm2 is zero.
+struct SampleCell {
+  bool valid = false;
+  Eigen::Vector3d along_mm = Eigen::Vector3d::Zero();
+  Eigen::Vector3d across_mm = Eigen::Vector3d::Zero();
+  double along_length_mm = 0.0;   ///< δx: the mean chord length (not the mean chord's length), for eq. 3.8
+  double across_length_mm = 0.0;  ///< δy
+  double density_per_mm2() const;
+  /// True when `offset_mm` (point minus sample) lies inside the cell: its in-plane coordinates on the two
+  /// chords within ±`reach` (½: the cell itself), and its distance off the cell's plane within the longer
+  /// half chord.
+  bool contains(const Eigen::Vector3d& offset_mm, double reach = 0.5) const;
+};
+SampleCell sample_cell(const RangeImage& image, int i, int j);
+
 /// Binary little-endian PLY, one `vertex` per valid sample (documented in docs/range-image-format.md). The
 /// temporary-file-and-rename write means a reader never sees half a file.
 /// The range image file's bytes (docs/range-image-format.md) and back; the parser refuses damage like

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <random>
 #include <sstream>
 
@@ -45,23 +46,38 @@ std::vector<Eigen::Vector3d> face_normals(const TriangleMesh& m) {
   return n;
 }
 
-/// Fine-model vertices one range image measures: a spec-compliant sample (σz, local density) within 1/√ρ of
-/// the vertex, on the vertex's side of the surface.
+/// Fine-model vertices one range image measures: the vertex lies in the cell of a spec-compliant sample (σz,
+/// local density; SampleCell), on the vertex's side of the surface. The cells tile what the image sampled,
+/// so a vertex counts by the area the compliant samples stand for: at the edge of a sampled region (the
+/// frustum's side, a shadow, where incidence crosses the density limit) a fraction of a chord outwards.
+/// Before 2026-11-29 any compliant sample within the spec spacing 1/√ρ counted, which credited every such
+/// edge with a whole spacing it did not sample: up to 0.04 of m_v on the cell (docs/verification.md).
 std::vector<std::uint8_t> vertices_measured(const TriangleMesh& fine, const std::vector<Eigen::Vector3d>& vertex_normals,
                                             const std::vector<Eigen::Vector3d>& tri_normals, const RangeImage& img,
-                                            const ModelSpec& spec, std::size_t* compliant_samples) {
+                                            const std::vector<std::uint8_t>& on_boundary, const ModelSpec& spec,
+                                            std::size_t* compliant_samples) {
+  // Three quarters of a chord, not a half: the range noise moves samples, and the cells of two jittered
+  // neighbours would otherwise leave slivers between them. A whole chord at the mesh's own boundary (an open
+  // sheet's rim): nothing lies beyond it to sample, and samples within the sample spacing of the end of a
+  // surface have measured up to it.
+  constexpr double kCellReach = 0.75, kBoundaryReach = 1.0;
   const std::size_t nv = fine.vertices.size();
   // The side test below reads the triangle each sample hit: simulation truth (callers check it is there).
   if (img.truth.size() != img.samples.size()) throw DataError("verification needs the simulated scanner's truth for every sample");
-  const double radius = 1.0 / std::sqrt(spec.density_per_mm2);
+  // A compliant cell has δx² + δy² ≤ 1/ρ, so it reaches at most (δx + δy) ≤ √(2/ρ) from its sample: the 27
+  // grid cells of side √2/√ρ around a vertex hold every cell that can contain it.
+  const double radius = std::sqrt(2.0 / spec.density_per_mm2);
   SampleGrid grid;
   grid.cell = radius;
+  std::vector<SampleCell> cells(img.samples.size());  // set for the compliant samples only
   for (int j = 0; j < img.rows; ++j)
     for (int i = 0; i < img.columns; ++i) {
       const RangeSample& s = img.at(i, j);
       if (!s.valid() || s.sigma_z_mm > spec.precision_mm) continue;
-      if (sample_density_per_mm2(img, i, j) < spec.density_per_mm2) continue;
+      const SampleCell cell = sample_cell(img, i, j);
+      if (cell.density_per_mm2() < spec.density_per_mm2) continue;
       const std::uint32_t idx = static_cast<std::uint32_t>(j) * img.columns + i;
+      cells[idx] = cell;
       const Eigen::Vector3d p = s.object_mm.cast<double>();
       grid.keyed.emplace_back(SampleGrid::key(grid.index(p.x()), grid.index(p.y()), grid.index(p.z())), idx);
       grid.box.extend(p);
@@ -70,35 +86,54 @@ std::vector<std::uint8_t> vertices_measured(const TriangleMesh& fine, const std:
   std::sort(grid.keyed.begin(), grid.keyed.end());
 
   std::vector<std::uint8_t> hit(nv, 0);
-  if (!grid.keyed.empty()) {
-    Eigen::AlignedBox3d reach = grid.box;
-    reach.min().array() -= radius;
-    reach.max().array() += radius;
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 1024), [&](const tbb::blocked_range<std::size_t>& r) {
-      for (std::size_t v = r.begin(); v != r.end(); ++v) {
-        const Eigen::Vector3d& p = fine.vertices[v];
-        if (!reach.contains(p)) continue;
-        const long cx = grid.index(p.x()), cy = grid.index(p.y()), cz = grid.index(p.z());
-        bool found = false;
-        for (long dx = -1; dx <= 1 && !found; ++dx)
-          for (long dy = -1; dy <= 1 && !found; ++dy)
-            for (long dz = -1; dz <= 1 && !found; ++dz) {
-              const std::uint64_t key = SampleGrid::key(cx + dx, cy + dy, cz + dz);
-              auto it = std::lower_bound(grid.keyed.begin(), grid.keyed.end(), std::make_pair(key, std::uint32_t{0}));
-              for (; it != grid.keyed.end() && it->first == key; ++it) {
-                const RangeSample& s = img.samples[it->second];
-                if ((s.object_mm.cast<double>() - p).squaredNorm() > radius * radius) continue;
-                // The sample must lie on the vertex's side of the surface (thin walls, sheet edges).
-                if (tri_normals[img.truth[it->second].triangle].dot(vertex_normals[v]) <= 0.0) continue;
-                found = true;
-                break;
-              }
+  if (grid.keyed.empty()) return hit;
+  Eigen::AlignedBox3d reach = grid.box;
+  reach.min().array() -= radius;
+  reach.max().array() += radius;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 1024), [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t v = r.begin(); v != r.end(); ++v) {
+      const Eigen::Vector3d& p = fine.vertices[v];
+      if (!reach.contains(p)) continue;
+      const double cell_reach = on_boundary[v] ? kBoundaryReach : kCellReach;
+      const long cx = grid.index(p.x()), cy = grid.index(p.y()), cz = grid.index(p.z());
+      bool found = false;
+      for (long dx = -1; dx <= 1 && !found; ++dx)
+        for (long dy = -1; dy <= 1 && !found; ++dy)
+          for (long dz = -1; dz <= 1 && !found; ++dz) {
+            const std::uint64_t key = SampleGrid::key(cx + dx, cy + dy, cz + dz);
+            auto it = std::lower_bound(grid.keyed.begin(), grid.keyed.end(), std::make_pair(key, std::uint32_t{0}));
+            for (; it != grid.keyed.end() && it->first == key; ++it) {
+              if (!cells[it->second].contains(p - img.samples[it->second].object_mm.cast<double>(), cell_reach)) continue;
+              // The sample must lie on the vertex's side of the surface (thin walls, sheet edges).
+              if (tri_normals[img.truth[it->second].triangle].dot(vertex_normals[v]) <= 0.0) continue;
+              found = true;
+              break;
             }
-        hit[v] = found;
-      }
-    });
-  }
+          }
+      hit[v] = found;
+    }
+  });
   return hit;
+}
+
+/// 1 for each vertex on an edge that only one triangle uses (the rim of an open mesh).
+std::vector<std::uint8_t> boundary_vertices(const TriangleMesh& m) {
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> edges;
+  edges.reserve(3 * m.triangles.size());
+  for (const auto& t : m.triangles)
+    for (int k = 0; k < 3; ++k) {
+      const std::uint32_t a = t[k], b = t[(k + 1) % 3];
+      edges.emplace_back(std::min(a, b), std::max(a, b));
+    }
+  std::sort(edges.begin(), edges.end());
+  std::vector<std::uint8_t> out(m.vertices.size(), 0);
+  for (std::size_t i = 0; i < edges.size();) {
+    std::size_t j = i;
+    while (j < edges.size() && edges[j] == edges[i]) ++j;
+    if (j - i == 1) out[edges[i].first] = out[edges[i].second] = 1;
+    i = j;
+  }
+  return out;
 }
 
 /// Each fine vertex's share of the area (a third of each adjacent triangle) and the total.
@@ -122,6 +157,7 @@ Verification verify_views(const TriangleMesh& fine, const SensorModel& sensor, c
   share_area(fine, out);
   const auto vertex_normals = area_weighted_normals(fine);
   const auto tri_normals = face_normals(fine);
+  const auto on_boundary = boundary_vertices(fine);
   TriangleMesh scene_mesh = fine;
   append_mesh(scene_mesh, options.occluders);
   const OcclusionScene scene(scene_mesh);
@@ -141,7 +177,7 @@ Verification verify_views(const TriangleMesh& fine, const SensorModel& sensor, c
     so.object_triangles = options.occluders.triangles.empty() ? 0 : fine.triangles.size();
     const RangeImage img = virtual_scan(scene, sensor, vv.executed, so, &vv.scan);
 
-    const std::vector<std::uint8_t> hit = vertices_measured(fine, vertex_normals, tri_normals, img, spec, &vv.compliant_samples);
+    const std::vector<std::uint8_t> hit = vertices_measured(fine, vertex_normals, tri_normals, img, on_boundary, spec, &vv.compliant_samples);
     for (std::size_t v = 0; v < nv; ++v) {
       if (!hit[v]) continue;
       measured_by[k].push_back(static_cast<std::uint32_t>(v));
@@ -197,6 +233,7 @@ Verification verify_images(const TriangleMesh& fine, const ModelSpec& spec, cons
   share_area(fine, out);
   const auto vertex_normals = area_weighted_normals(fine);
   const auto tri_normals = face_normals(fine);
+  const auto on_boundary = boundary_vertices(fine);
   out.measured.assign(nv, 0);
   double cumulative = 0.0;
   for (std::size_t k = 0; k < images.size(); ++k) {
@@ -210,7 +247,7 @@ Verification verify_images(const TriangleMesh& fine, const ModelSpec& spec, cons
                         " beyond the fine model's " + std::to_string(fine.triangles.size()) + " (not a scan of this model)");
     ViewVerification vv;
     vv.executed = images[k].pose;
-    const auto hit = vertices_measured(fine, vertex_normals, tri_normals, images[k], spec, &vv.compliant_samples);
+    const auto hit = vertices_measured(fine, vertex_normals, tri_normals, images[k], on_boundary, spec, &vv.compliant_samples);
     for (std::size_t v = 0; v < nv; ++v) {
       if (!hit[v]) continue;
       vv.alone_mm2 += out.vertex_area_mm2[v];

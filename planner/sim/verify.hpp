@@ -2,9 +2,10 @@
 // Verified measurability m_v (thesis 3.3.2, 4.4.1): execute a view plan with the virtual scanner against the
 // fine model and measure, area-weighted over the fine mesh's vertices, what was measured to specification.
 //
-// A fine vertex counts as measured by a view when a sample of that view lies within the spec's sample
-// spacing 1/√ρ of it, on a triangle facing the same side as the vertex, with predicted σz ≤ the spec's
-// precision and a local density (chords to its range-image neighbours, sample_density_per_mm2) ≥ the spec's.
+// A fine vertex counts as measured by a view when it lies in the cell (SampleCell: ¾ of a chord to each
+// side of the sample; docs/verification.md says why ¾) of a sample of that view on a triangle facing the same
+// side as the vertex, with predicted σz ≤ the spec's precision and a local density (chords to its
+// range-image neighbours, sample_density_per_mm2) ≥ the spec's.
 #include <cstdint>
 #include <filesystem>
 #include <string>

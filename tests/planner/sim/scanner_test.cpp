@@ -63,6 +63,20 @@ TEST(VirtualScanner, PlaneAtKnownRangeGivesEverySampleWithTheModelSpacing) {
   const double rho = 1.0 / (dx * dx + dy * dy);
   EXPECT_NEAR(rho, 5.713, 0.001);
   EXPECT_NEAR(sp::sample_density_per_mm2(img, 128, 128), rho, 0.01 * rho);
+  // The sample's cell: the two chords, δx along the profile and δy across, and half of each to either side.
+  const sp::SampleCell cell = sp::sample_cell(img, 128, 128);
+  ASSERT_TRUE(cell.valid);
+  EXPECT_NEAR(cell.along_mm.norm(), dx, 1e-3 * dx);
+  EXPECT_NEAR(cell.across_mm.norm(), dy, 1e-4);
+  EXPECT_NEAR(std::abs(cell.along_mm.normalized().dot(cell.across_mm.normalized())), 0.0, 1e-3);  // a plane square on
+  const Eigen::Vector3d ex = cell.along_mm.normalized(), ey = cell.across_mm.normalized();
+  EXPECT_TRUE(cell.contains(0.45 * dx * ex + 0.45 * dy * ey));
+  EXPECT_FALSE(cell.contains(0.55 * dx * ex));
+  EXPECT_FALSE(cell.contains(-0.55 * dy * ey));
+  EXPECT_TRUE(cell.contains(0.7 * dx * ex, 0.75));
+  EXPECT_FALSE(cell.contains(Eigen::Vector3d(0, 0, 0.6 * dx)));  // off the plane by more than half the longer chord
+  // The first profile has no neighbour behind it: its cell takes the one chord it has.
+  EXPECT_NEAR(sp::sample_cell(img, 128, 0).across_mm.norm(), dy, 1e-4);
   // And the swath edge is where the frustum says: x = z·tan(Φx/2).
   EXPECT_NEAR(std::abs(img.at(0, 128).camera_mm.x()), z * std::tan(0.5 * s.fov_x_rad), 1e-3);
 }

@@ -68,6 +68,30 @@ TEST(Verify, OneViewCoveringAPlaneMeasuresAllOfIt) {
   EXPECT_LT(sparse.mv, 0.01);
 }
 
+TEST(Verify, AViewMeasuresItsFootprintAndHalfAChordBeyondNotASpecSpacing) {
+  // One view inside a larger plane: the measured area is the footprint the samples span, w × L, plus at most
+  // the cells' reach (¾ chord) on each side. The former criterion (any compliant sample within 1/√ρ = 0.71 mm)
+  // added a whole spec spacing on every side: (w + 1.41)(L + 1.41), 3 % more than was sampled.
+  const sp::SensorModel s = sp::testing::thesis_sensor();
+  const sp::ModelSpec spec = sp::testing::thesis_spec();
+  const sp::TriangleMesh plane = sp::testing::flat_patch(100, 0.25);
+  sp::VerifyOptions opt;
+  opt.noise = false;
+  opt.analytic = false;
+  const double z = 160.0, length = 60.0;
+  const auto v = sp::verify_views(plane, s, spec, {above(0, 0, z, length)}, {}, opt);
+  const double w = 2.0 * z * std::tan(0.5 * s.fov_x_rad);
+  // Rays at equal angles: the outermost chord is the longest, z·Δφ/cos²(Φx/2).
+  const double dx = z * (s.fov_x_rad / (s.samples_x - 1)) / std::pow(std::cos(0.5 * s.fov_x_rad), 2);
+  const double dy = length / (s.samples_y - 1);
+  const double measured = v.views[0].alone_mm2;
+  const double spacing = 1.0 / std::sqrt(spec.density_per_mm2);
+  EXPECT_GT(measured, (w - 0.25) * (length - 0.25));  // the vertex grid resolves the border to 0.125 mm
+  EXPECT_LT(measured, (w + 1.5 * dx + 0.25) * (length + 1.5 * dy + 0.25));
+  EXPECT_LT(measured, (w + 2 * spacing) * (length + 2 * spacing) - 0.5 * (w + length) * spacing)
+      << "w " << w << " L " << length << " chords " << dx << ", " << dy;
+}
+
 TEST(Verify, RemovingAViewLowersMvByItsUniqueCoverage) {
   const sp::SensorModel s = sp::testing::thesis_sensor();
   const sp::ModelSpec spec = sp::testing::thesis_spec();
