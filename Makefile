@@ -5,7 +5,7 @@ JOBS       ?= $(shell nproc)
 CMAKE      ?= cmake
 SCANCELL    = $(BUILD)/tools/scancell
 
-.PHONY: all deps build test test-asan fuzz demo demo-rough demo-offline kill-test bench quality quality-cell monitor monitor-check clean
+.PHONY: all deps build test test-asan fuzz demo demo-rough demo-flip demo-offline kill-test bench quality quality-cell monitor monitor-check clean
 
 all: build
 
@@ -64,6 +64,9 @@ demo: build
 # The same from nothing but a bounding box: rough scan, fused rough model, plan, execute, register, replan.
 demo-rough: build
 	scripts/demo.sh $(BUILD) rough
+
+demo-flip: build
+	scripts/demo.sh $(BUILD) flip
 
 # The planner and verifier alone, offline: a plan file, its verification report and coverage pictures.
 demo-offline: build

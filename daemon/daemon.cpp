@@ -24,7 +24,9 @@ bool runnable(JobState s) {
          s == JobState::verifying || s == JobState::replanning;
 }
 
-bool ends_watch(JobState s) { return finished(s) || s == JobState::faulted || s == JobState::paused; }
+bool ends_watch(JobState s) {
+  return finished(s) || s == JobState::faulted || s == JobState::paused || s == JobState::awaiting_operator;
+}
 
 /// A file a client names: absolute, a regular file (a FIFO or device would block the thread that opens it),
 /// and, when jobs.allowed_dirs is set, inside one of them after links are resolved. Nothing of the file's
@@ -166,7 +168,8 @@ void Daemon::job_loop() {
     }
     current_ = 0;
     notifier_.status("idle (job " + std::to_string(*id) + " " + to_string(end) + ")");
-    if (running_ && finished(end)) {
+    // Parked at the end, and before the operator reaches into the cell to turn the part over.
+    if (running_ && (finished(end) || end == JobState::awaiting_operator)) {
       try {
         park(*io_, models.cell, config_.jobs.move_timeout);
       } catch (const std::exception& e) {
@@ -297,6 +300,7 @@ json Daemon::handle(const json& req, const std::function<bool(const json&)>& sen
   if (cmd == "watch") return watch(req, send);
   if (cmd == "pause" || cmd == "abort") return pause_or_abort(req, cmd);
   if (cmd == "resume") return resume(req);
+  if (cmd == "continue") return continue_setup(req);
   if (cmd == "calibrate") {
     const std::string kind = req["kind"].get<std::string>();
     check_calibration_kind(kind);
@@ -323,6 +327,10 @@ json Daemon::submit(const json& req) {
     r.rough_vertices = static_cast<std::size_t>(std::max<std::int64_t>(n, 0));  // validate_request checks the range
   }
   r.placement = req.value("placement", std::string());
+  if (req.contains("setups")) {
+    if (!req["setups"].is_number_integer()) throw std::invalid_argument("submit: 'setups' must be an integer in [1, " + std::to_string(kMaxSetups) + "]");
+    r.setups = req["setups"].get<int>();  // validate_request checks the range
+  }
   try {
     validate_request(r, &shutting_down_);
   } catch (const scancell::MeshError& e) {
@@ -430,6 +438,17 @@ json Daemon::resume(const json& req) {
     bring_up(*io_, config_.models.cell, config_.home_timeout);
   }
   journal_->set_state(j.id, JobState::queued, "resumed");
+  wake_.notify_all();
+  return {{"job", j.id}, {"state", "queued"}};
+}
+
+json Daemon::continue_setup(const json& req) {
+  const JobRecord j = job_of(*journal_, req, "continue");
+  if (j.state != JobState::awaiting_operator)
+    throw std::invalid_argument("continue: job " + std::to_string(j.id) + " is " + to_string(j.state) +
+                                ", not awaiting the operator (continue confirms that the part was turned over as a setup asked)");
+  journal_->set_state(j.id, JobState::queued, "continued: the operator turned the part over");
+  report({j.id, JobState::queued, 0, 0, 0, 0, 0, 0, "queued: continued (the operator turned the part over)", "", ""});
   wake_.notify_all();
   return {{"job", j.id}, {"state", "queued"}};
 }

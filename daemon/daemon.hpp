@@ -49,6 +49,8 @@ class Daemon {
   nlohmann::json watch(const nlohmann::json& req, const std::function<bool(const nlohmann::json&)>& send);
   nlohmann::json pause_or_abort(const nlohmann::json& req, const std::string& cmd);
   nlohmann::json resume(const nlohmann::json& req);
+  /// awaiting_operator -> queued: the operator turned the part over as the job's next setup asked (issue 20).
+  nlohmann::json continue_setup(const nlohmann::json& req);
   nlohmann::json reload();
   std::optional<std::int64_t> next_runnable();
 

@@ -163,6 +163,9 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
       s.fail(s.key_path("failed_row_weight"), "must be in [0, 1]");
     c.jobs.min_gain_per_view_mm2 = s.non_negative("min_gain_per_view_mm2", c.jobs.min_gain_per_view_mm2);
     c.jobs.next_setup_min_area_mm2 = s.ranged("next_setup_min_area_mm2", c.jobs.next_setup_min_area_mm2, 0.0, 1e6);
+    c.jobs.max_setups = s.ranged("max_setups", c.jobs.max_setups, 1, kMaxSetups);
+    c.jobs.sim_placement_error_mm = s.ranged("sim_placement_error_mm", c.jobs.sim_placement_error_mm, 0.0, 50.0);
+    c.jobs.sim_placement_error_rad = s.ranged("sim_placement_error_rad", c.jobs.sim_placement_error_rad, 0.0, M_PI);
     c.jobs.coverage.row_fraction = s.get_or<double>("row_fraction", c.jobs.coverage.row_fraction);
     if (!(c.jobs.coverage.row_fraction > 0.0 && c.jobs.coverage.row_fraction <= 1.0))
       s.fail(s.key_path("row_fraction"), "must be in (0, 1]");

@@ -27,6 +27,7 @@ json JobRequest::to_json() const {
   if (rough_vertices) j["rough_vertices"] = *rough_vertices;
   if (bbox_mm) j["bbox_mm"] = {bbox_mm->x(), bbox_mm->y(), bbox_mm->z()};
   if (!placement.empty()) j["placement"] = placement;
+  if (setups) j["setups"] = *setups;
   return j;
 }
 
@@ -44,6 +45,7 @@ JobRequest JobRequest::from_json(const json& j) {
   r.truth = j.value("truth", std::string());
   if (j.contains("rough_vertices")) r.rough_vertices = j["rough_vertices"].get<std::size_t>();
   r.placement = j.value("placement", std::string());
+  if (j.contains("setups")) r.setups = j["setups"].get<int>();
   return r;
 }
 
@@ -59,6 +61,11 @@ void validate_request(const JobRequest& r, const std::atomic<int>* cancel) {
                                 std::to_string(sp::kMaxRoughVertices) + "], got " + std::to_string(*r.rough_vertices));
   if (!r.placement.empty() && r.placement != "auto" && r.placement != "as_given")
     throw std::invalid_argument("submit: 'placement' must be auto or as_given");
+  if (r.setups && (*r.setups < 1 || *r.setups > kMaxSetups))
+    throw std::invalid_argument("submit: 'setups' must be in [1, " + std::to_string(kMaxSetups) + "], got " + std::to_string(*r.setups));
+  if (r.setups && *r.setups > 1 && r.bbox_mm)
+    throw std::invalid_argument("submit: 'setups' over 1 needs a mesh; a bounding-box job measures one setup (its rough model "
+                                "is fused in the table frame, and turning it over is not supported yet)");
   if (r.bbox_mm && r.placement == "auto")
     throw std::invalid_argument("submit: 'placement' auto needs a mesh; a bounding-box job's object already stands on the table");
   if (!r.mesh.empty()) load_object(r.mesh, r.fit_mm, cancel);

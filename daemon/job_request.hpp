@@ -14,6 +14,9 @@
 
 namespace scancell::daemon {
 
+/// At most this many setups per job (jobs.max_setups, a submit's `setups`).
+inline constexpr int kMaxSetups = 4;
+
 /// What a submit request asks for, validated (files loaded) before the job is accepted.
 struct JobRequest {
   std::string mesh;                    // rough model of the object (absolute path)
@@ -27,6 +30,10 @@ struct JobRequest {
   /// How the object rests on the plate: "auto" (plan its stable resting poses, keep the best; the operator
   /// places it as the result says), "as_given", or empty for the settings' placement.mode.
   std::string placement;
+  /// Setups the job may use (issue 20): after the first, when enough is left unmeasured, the job waits for
+  /// the operator to turn the part over as it says (awaiting_operator) and measures the rest. Empty: the
+  /// daemon's jobs.max_setups. Mesh jobs only.
+  std::optional<int> setups;
   nlohmann::json to_json() const;
   static JobRequest from_json(const nlohmann::json& j);
 };

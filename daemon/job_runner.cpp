@@ -11,6 +11,7 @@
 #include <fstream>
 #include <map>
 #include <mutex>
+#include <random>
 #include <sstream>
 #include <thread>
 
@@ -61,6 +62,47 @@ std::vector<std::string> view_records(const sp::ViewPlan& p) {
   return out;
 }
 
+/// Simulation: how the simulated operator puts the part down in setup `setup` of job `job`, against what was
+/// asked: a turn about the table axis and a shift on the plate, uniform within ± the configured bounds and
+/// the same on every run of the job (a resume re-places it identically).
+Eigen::Isometry3d sim_operator_error(std::int64_t job, int setup, double mm, double rad) {
+  std::mt19937_64 rng(0x5e7u ^ (static_cast<std::uint64_t>(job) * 0x9E3779B97F4A7C15ull) ^ static_cast<std::uint64_t>(setup));
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const double dx = mm * u(rng), dy = mm * u(rng), turn = rad * u(rng);
+  Eigen::Isometry3d e = Eigen::Isometry3d::Identity();
+  e.linear() = Eigen::AngleAxisd(turn, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  e.translation() = Eigen::Vector3d(dx, dy, 0.0);
+  return e;
+}
+
+Eigen::Isometry3d pose_from(const json& a, const std::string& what) {
+  return Eigen::Isometry3d(scancell::matrix4_from_row_major(a, what));
+}
+
+/// A 3×3 rotation written by row_major_json; DataError naming `what` unless it is 9 finite numbers.
+Eigen::Matrix3d rotation_from(const json& a, const std::string& what) {
+  if (!a.is_array() || a.size() != 9) throw scancell::DataError(what + ": needs 9 numbers (row major)");
+  Eigen::Matrix3d m;
+  for (int k = 0; k < 9; ++k) {
+    if (!a[k].is_number() || !std::isfinite(a[k].get<double>())) throw scancell::DataError(what + "[" + std::to_string(k) + "]: must be a finite number");
+    m(k / 3, k % 3) = a[k].get<double>();
+  }
+  return m;
+}
+
+/// Which side the operator is to put down, for people: the object-frame direction that faces the plate.
+std::string down_side(const Eigen::Vector3d& down) {
+  int axis = 0;
+  down.cwiseAbs().maxCoeff(&axis);
+  const char* names[] = {"x", "y", "z"};
+  char b[160];
+  if (std::abs(down[axis]) > 0.98)
+    std::snprintf(b, sizeof b, "its %s%s side down", down[axis] < 0 ? "-" : "+", names[axis]);
+  else
+    std::snprintf(b, sizeof b, "the side facing (%.2f, %.2f, %.2f) of the object frame down", down.x(), down.y(), down.z());
+  return b;
+}
+
 }  // namespace
 
 struct JobRunner::Job {
@@ -90,6 +132,12 @@ struct JobRunner::Job {
   /// Per plan and view (0-based), the predicted rows its sweep passed without a profile (held_rows).
   std::map<std::int64_t, std::map<int, std::vector<std::uint32_t>>> excused;
   std::vector<std::vector<std::uint32_t>> view_rows;  // the executing round's rows per view
+  // Setups (issue 20): the one being measured (1-based), its first plan round, how many the job may use,
+  // and, from the second on, the placement asked of the operator (object to table).
+  int setup = 1;
+  int setup_first_round = 0;
+  int max_setups = 1;
+  Eigen::Isometry3d asked = Eigen::Isometry3d::Identity();
 };
 
 void JobRunner::note_lost_profiles(Job& j, std::int64_t plan, int view, const sp::RangeImage& img,
@@ -104,6 +152,9 @@ std::vector<json> JobRunner::round_infos(const Job& j) {
   for (const auto& [plan, round] : journal_.plan_rounds(j.id)) {
     if (round < 0) continue;
     json info = json::parse(journal_.plan_info(plan));
+    // The closed loop's evidence is per setup: a row that failed with the part in one pose may be measured
+    // easily in the next.
+    if (info.value("setup", 1) != j.setup) continue;
     json ex = json::object();
     if (const auto e = j.excused.find(plan); e != j.excused.end())
       for (const auto& [view, rows] : e->second) ex[std::to_string(view)] = rows;
@@ -167,7 +218,100 @@ json JobRunner::next_setup(Job& j) {
   }
 }
 
-void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
+JobState JobRunner::end_setup(Job& j, JobState state, const std::string& cause) {
+  if (j.setup >= j.max_setups || j.request.bbox_mm || settings_.next_setup_min_area_mm2 <= 0.0) {
+    finish(j, state, cause);
+    return state;
+  }
+  const RowTally t = tally_unmeasured(*j.rough, j.coverage->unmeasured_rows(), j.unmeasurable);
+  if (t.unmeasured_area < settings_.next_setup_min_area_mm2) {
+    finish(j, state, cause);
+    return state;
+  }
+  const json advice = next_setup(j);
+  if (!advice.contains("resting_pose")) {
+    finish(j, state, cause, &advice);
+    return state;
+  }
+  // The next setup: the placement asked of the operator (the rough model in the advised resting pose, centred
+  // on the plate like every placement) and the exploration views that will find the part as really put down.
+  const int next = j.setup + 1;
+  const Eigen::Matrix3d rotation = rotation_from(advice.at("object_to_table_row_major"), "next setup object_to_table_row_major");
+  const Eigen::Isometry3d asked = sp::place_on_plate(j.object, rotation, models_.cell.object_on_table.translation());
+  Eigen::AlignedBox3d box;
+  for (const auto& v : j.object.vertices) box.extend(asked * v);
+  sp::CellModel table_cell = models_.cell;
+  table_cell.object_on_table = Eigen::Isometry3d::Identity();
+  std::vector<std::string> skipped;
+  std::vector<sp::ExplorationView> views;
+  // The alignment needs a good part of the surface, not all of it: a part larger than the sensor's depth of
+  // field is explored as the largest box that fits, centred on it (its middle is in range).
+  Eigen::Vector3d size = box.sizes();
+  const double fits = 0.95 * (models_.sensor.range_max_mm - models_.sensor.range_min_mm);
+  if (size.norm() > fits) size *= fits / size.norm();
+  try {
+    views = sp::exploration_views(table_cell, models_.sensor, size, settings_.setup_exploration, &skipped);
+  } catch (const std::exception& e) {
+    finish(j, state, cause + "; a setup " + std::to_string(next) + " was advised but cannot be explored: " + e.what(), &advice);
+    return state;
+  }
+  std::vector<std::string> poses;
+  for (const auto& v : views) poses.push_back(json({{"axes", v.q}, {"scan_length_mm", v.scan_length_mm}}).dump());
+  const std::string instruction = "turn the part over: " + down_side(Eigen::Vector3d(advice.at("down_object")[0].get<double>(),
+                                                                                     advice.at("down_object")[1].get<double>(),
+                                                                                     advice.at("down_object")[2].get<double>())) +
+                                  " (resting pose " + std::to_string(advice.at("resting_pose").get<int>()) + "), centred on the plate" +
+                                  (advice.contains("picture") ? "; picture " + advice.at("picture").get<std::string>() : "") +
+                                  "; then scancellctl continue " + std::to_string(j.id);
+  journal_.add_plan(j.id, -next, poses,
+                    json({{"setup", next},
+                          {"setup_exploration", true},
+                          {"asked_object_to_table", row_major_json(asked.matrix())},
+                          {"advice", advice},
+                          {"instruction", instruction},
+                          {"previous_setup_end", {{"state", to_string(state)}, {"cause", cause}}},
+                          {"measured_coverage_before", j.progress.measured},
+                          {"skipped", skipped}})
+                        .dump());
+  journal_.set_result(j.id, json({{"state", "awaiting_operator"},
+                                  {"setup", j.setup},
+                                  {"next_setup_number", next},
+                                  {"measured_coverage", j.progress.measured},
+                                  {"instruction", instruction},
+                                  {"next_setup", advice}})
+                                .dump());
+  transition(j, JobState::awaiting_operator, "setup " + std::to_string(j.setup) + " " + to_string(state) + " (measured " +
+                                                 fmt(j.progress.measured) + " of the rough model); " + instruction);
+  return JobState::awaiting_operator;
+}
+
+namespace {
+/// The job's setups for the result: per setup the placement asked, how it was aligned and what it measured.
+json setups_json(Journal& journal, std::int64_t job) {
+  json out = json::array();
+  auto plans = journal.plan_rounds(job);  // by round; a further setup's exploration (round -k) comes in journal order
+  std::sort(plans.begin(), plans.end());
+  for (const auto& [plan, round] : plans) {
+    const json info = json::parse(journal.plan_info(plan));
+    if (round <= -2) {
+      out.push_back({{"setup", info.at("setup")},
+                     {"resting_pose", info.at("advice").value("resting_pose", 0)},
+                     {"asked_object_to_table_row_major", info.at("asked_object_to_table")},
+                     {"measured_coverage_before", info.value("measured_coverage_before", 0.0)},
+                     {"views", 0}});
+    } else if (round >= 0) {
+      if (out.empty()) out.push_back({{"setup", 1}, {"views", 0}});
+      json& s = out.back();
+      s["views"] = s["views"].get<int>() + static_cast<int>(journal.scans(plan).size());
+      if (info.contains("alignment")) s["alignment"] = info.at("alignment");
+      if (info.contains("object_on_table") && !s.contains("object_on_table_row_major")) s["object_on_table_row_major"] = info.at("object_on_table");
+    }
+  }
+  return out;
+}
+}  // namespace
+
+void JobRunner::finish(Job& j, JobState state, const std::string& cause, const json* advice) {
   json result = {{"state", to_string(state)},
                  {"rounds", j.round + 1},
                  {"measured_coverage", j.progress.measured},
@@ -202,6 +346,23 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
     for (auto& v : stored) images.push_back(std::move(v.image));
   stored.clear();
   result["views"] = views;
+  {
+    // What the executed views cost the cell at its real speeds (the plan's move and sweep times; the
+    // simulated drives may run faster): the figure issue 15 compares with an oracle's plan.
+    double move_s = 0.0, scan_s = 0.0;
+    for (const auto& [plan, round] : journal_.plan_rounds(j.id))
+      if (round >= 0)
+        for (const auto& v : journal_.views(plan))
+          if (v.stored) {
+            const json pj = json::parse(v.pose_json);
+            move_s += pj.value("move_s", 0.0);
+            scan_s += pj.value("scan_s", 0.0);
+          }
+    result["cell_time_s"] = move_s + scan_s;
+    result["cell_move_s"] = move_s;
+    result["cell_scan_s"] = scan_s;
+  }
+  if (j.max_setups > 1) result["setups"] = setups_json(journal_, j.id);
   if (!j.rough_quality.is_null()) result["rough_model"] = j.rough_quality;
   if (!j.placement.is_null()) {
     // How the operator is to place the object (the simulated cell placed it so): the chosen pose's rotation
@@ -226,8 +387,9 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause) {
       result["hypothetical_unmeasured_rows"] = t.hypothetical;  // of those, not measured (incl. unmeasurable)
       result["hypothetical_unmeasured_area_mm2"] = t.hypothetical_area;
     }
-    if (state != JobState::aborted && settings_.next_setup_min_area_mm2 > 0.0 && t.unmeasured_area >= settings_.next_setup_min_area_mm2 &&
-        !j.object.vertices.empty())
+    if (advice) result["next_setup"] = *advice;
+    else if (state != JobState::aborted && settings_.next_setup_min_area_mm2 > 0.0 && t.unmeasured_area >= settings_.next_setup_min_area_mm2 &&
+             !j.object.vertices.empty())
       result["next_setup"] = next_setup(j);
     const auto dir = settings_.jobs_dir / std::to_string(j.id);
     result["unmeasured_file"] = write_unmeasured_rows(*j.rough, rows, dir).string();
@@ -283,6 +445,7 @@ bool JobRunner::read_request(Job& j, const JobRecord& rec) {
     j.spec = j.request.spec.empty() ? models_.spec : sp::load_spec(j.request.spec);
     j.settings = j.request.settings.empty() ? models_.settings : sp::load_planner_settings(j.request.settings);
     if (j.request.rough_vertices) j.rough_options.target_vertices = *j.request.rough_vertices;
+    j.max_setups = j.request.setups.value_or(settings_.max_setups);
     if (!j.request.placement.empty()) j.settings.placement.automatic = j.request.placement == "auto";
     if (j.request.bbox_mm) j.settings.placement.automatic = false;  // it already stands on the table
     j.rough_options.seed = j.settings.seed;
@@ -340,12 +503,24 @@ std::optional<JobState> JobRunner::plan_first_round(Job& j, const std::atomic<in
 /// rough model, the measured coverage and the registration cloud from every stored scan, and the head (with
 /// what stands on the table, in simulation).
 void JobRunner::restore(Job& j, const std::vector<std::int64_t>& plans) {
-  // The first round's info carries the placement and the rows nothing can measure in this cell.
-  const json info0 = json::parse(journal_.plan_info(plans.front()));
+  // The current setup's first round carries its placement and the rows nothing can measure in it (the first
+  // round's, the resting-pose choice too).
+  std::size_t first = 0;
+  j.setup = 1;
+  for (std::size_t k = 0; k < plans.size(); ++k) {
+    const int setup = json::parse(journal_.plan_info(plans[k])).value("setup", 1);
+    if (setup > j.setup) {
+      j.setup = setup;
+      first = k;
+    }
+  }
+  j.setup_first_round = static_cast<int>(first);
+  const json info0 = json::parse(journal_.plan_info(plans[first]));
   j.cell = models_.cell;
-  j.cell.object_on_table = Eigen::Isometry3d(scancell::matrix4_from_row_major(info0.at("object_on_table"), "plan info object_on_table"));
+  j.cell.object_on_table = pose_from(info0.at("object_on_table"), "plan info object_on_table");
   j.unmeasurable = info0.at("unmeasurable_rows").get<std::vector<std::uint32_t>>();
-  if (info0.contains("placement")) j.placement = info0.at("placement");
+  if (j.setup > 1) j.asked = pose_from(info0.at("asked_object_to_table"), "plan info asked_object_to_table");
+  if (const json round0 = json::parse(journal_.plan_info(plans.front())); round0.contains("placement")) j.placement = round0.at("placement");
   if (!j.rough) j.rough = sp::build_rough_model(j.object, j.rough_options);
   if (j.rough->size() != info0.at("rows").get<std::size_t>())
     throw scancell::DataError("job " + std::to_string(j.id) + ": the rough model now has " + std::to_string(j.rough->size()) +
@@ -382,7 +557,18 @@ void JobRunner::restore(Job& j, const std::vector<std::int64_t>& plans) {
   } else {
     j.truth_object = load_object(j.request.truth.empty() ? j.request.mesh : j.request.truth, j.request.fit_mm);
   }
-  j.head = heads_(sp::with_fixtures(j.truth_object, j.cell), j.truth_object.triangles.size(), j.cell);
+  // From the second setup on, the part lies as the simulated operator put it down, which the cell knows only
+  // as well as the alignment found it: the truth in the plan's object frame is off by what the alignment missed.
+  sp::TriangleMesh on_table = j.truth_object;
+  if (j.setup > 1) {
+    const Eigen::Isometry3d to_plan = j.cell.object_on_table.inverse() * actual_placement(j, j.setup, j.asked);
+    for (auto& v : on_table.vertices) v = to_plan * v;
+  }
+  j.head = heads_(sp::with_fixtures(on_table, j.cell), on_table.triangles.size(), j.cell);
+}
+
+Eigen::Isometry3d JobRunner::actual_placement(const Job& j, int setup, const Eigen::Isometry3d& asked) const {
+  return sim_operator_error(j.id, setup, settings_.sim_placement_error_mm, settings_.sim_placement_error_rad) * asked;
 }
 
 /// Round `plans.back()`: its views executed from the first unfinished one, then the cloud so far written.
@@ -479,26 +665,23 @@ std::optional<JobState> JobRunner::close_or_replan(Job& j, std::int64_t plan, co
   // Hypothetical rows are chased for one replanning round (views aimed there explore what the rough scan
   // missed); after that, only measurable rows of seen surface keep the job open.
   if (open == 0 && (guessed == 0 || j.round >= 1)) {
-    finish(j, JobState::done, "spec met: " + summary);
-    return JobState::done;
+    return end_setup(j, JobState::done, "spec met: " + summary);
   }
   std::size_t open_retired = 0;
   for (auto r : j.coverage->unmeasured_rows())
     open_retired += retired[r] && (j.rough->hypothetical.empty() || !j.rough->hypothetical[r]);
   if (open_retired == open && (guessed == 0 || j.round >= 1)) {
-    finish(j, JobState::stalled, std::to_string(n_retired) + " rows (" + fmt(retired_area, 1) + " mm2) need attention: predicted measurable by " +
+    return end_setup(j, JobState::stalled, std::to_string(n_retired) + " rows (" + fmt(retired_area, 1) + " mm2) need attention: predicted measurable by " +
                                      std::to_string(settings_.retire_after_failures) +
                                      " rounds, or by a round that measured nothing new, and not measured; " + summary);
-    return JobState::stalled;
   }
-  if (j.round + 1 >= settings_.max_rounds) {
-    finish(j, JobState::stalled, "after " + std::to_string(j.round + 1) + " rounds: " + summary);
-    return JobState::stalled;
+  if (j.round - j.setup_first_round + 1 >= settings_.max_rounds) {
+    return end_setup(j, JobState::stalled, "after " + std::to_string(j.round - j.setup_first_round + 1) + " rounds" +
+                                              (j.setup > 1 ? " of setup " + std::to_string(j.setup) : "") + ": " + summary);
   }
   if (j.round > 0 && j.progress.measured <= info.value("measured_before", 0.0) + 1e-9) {
-    finish(j, JobState::stalled, "round " + std::to_string(j.round) + " measured nothing new; " + std::to_string(n_retired) +
+    return end_setup(j, JobState::stalled, "round " + std::to_string(j.round) + " measured nothing new; " + std::to_string(n_retired) +
                                      " rows (" + fmt(retired_area, 1) + " mm2) need attention: " + summary);
-    return JobState::stalled;
   }
   transition(j, JobState::replanning, std::to_string(open) + " rows left");
   sp::PlannerSettings replan = j.settings;
@@ -520,25 +703,27 @@ std::optional<JobState> JobRunner::close_or_replan(Job& j, std::int64_t plan, co
     // The object rests as round 0 placed it (the configured or the chosen orientation).
     sp::CellModel resting = models_.cell;
     resting.object_on_table.linear() = j.cell.object_on_table.linear();
+    // A further setup rests where the alignment found it (off centre, turned): handed over exactly.
+    if (j.setup > 1) resting.object_on_table.translation() = sp::plate_offset_of(j.object, j.cell.object_on_table);
     return sp::plan_views(j.object, models_.sensor, j.spec, replan, j.rough_options, settings_.planner_threads,
                           &resting, &measured, &weight_scale, &stop);
   }, stop);
   if (p.views.empty()) {
-    finish(j, JobState::stalled, "replan adds nothing: " + summary);
-    return JobState::stalled;
+    return end_setup(j, JobState::stalled, "replan adds nothing: " + summary);
   }
   const double gain_per_view = p.predicted_gain_mm2 / static_cast<double>(p.views.size());
   if (gain_per_view < settings_.min_gain_per_view_mm2) {
-    finish(j, JobState::stalled, "the next round would gain " + fmt(gain_per_view, 2) + " mm2 per view (" +
+    return end_setup(j, JobState::stalled, "the next round would gain " + fmt(gain_per_view, 2) + " mm2 per view (" +
                                      std::to_string(p.views.size()) + " views), under jobs.min_gain_per_view_mm2 " +
                                      fmt(settings_.min_gain_per_view_mm2, 1) + ": " + summary);
-    return JobState::stalled;
   }
   const std::vector<std::string> poses = view_records(p);
   const double est_rest = p.cover.cumulative_fraction.empty() ? 0.0 : p.cover.cumulative_fraction.back();
   double rest_area = 0.0;
   for (std::size_t r = 0; r < measured.size(); ++r) rest_area += measured[r] ? 0.0 : j.rough->area_mm2[r];
   const json rinfo = {{"round", j.round + 1},
+                      {"setup", j.setup},
+                      {"object_on_table", row_major_json(p.cell->object_on_table.matrix())},
                       {"rows", j.rough->size()},
                       {"estimated", est_rest},
                       {"estimated_total", j.progress.measured + est_rest * rest_area / total},
@@ -563,7 +748,7 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
   j.progress.state = rec.state;
   if (finished(rec.state)) return rec.state;
   // Paused or faulted (before it started, or left so): only resume, which queues it again, makes it runnable.
-  if (rec.state == JobState::paused || rec.state == JobState::faulted) return rec.state;
+  if (rec.state == JobState::paused || rec.state == JobState::faulted || rec.state == JobState::awaiting_operator) return rec.state;
   if (!read_request(j, rec)) return JobState::faulted;
 
   try {
@@ -578,6 +763,11 @@ JobState JobRunner::run(std::int64_t id, const std::atomic<int>& stop) {
     if (round_plans().empty())
       if (const auto end = plan_first_round(j, stop)) return *end;
     restore(j, round_plans());
+    // A further setup the operator confirmed (continue): explored and aligned, then planned, once.
+    if (const auto pending = pending_setup(j.id)) {
+      if (const auto end = start_setup(j, *pending, stop)) return *end;
+      restore(j, round_plans());
+    }
     while (true) {
       const auto plans = round_plans();
       const json info = execute_round(j, plans, stop);
@@ -638,27 +828,9 @@ void JobRunner::rough_scan(Job& j, const std::atomic<int>& stop) {
   }
   if (!std::filesystem::exists(rough_file)) {
     if (j.progress.state != JobState::rough_scanning) transition(j, JobState::rough_scanning, "resuming");
-    const auto views = journal_.views(*plan);
-    j.progress.views = static_cast<int>(views.size());
     // The scanner sees the table too: its samples carve the space above it (the fusion's floor keeps the
     // table itself out of the model), so the table's own triangles give samples here.
-    const sp::TriangleMesh scene = sp::with_fixtures(j.truth_table, table_cell);
-    auto head = heads_(scene, scene.triangles.size(), table_cell);
-    for (const auto& v : views) {
-      if (v.stored) continue;
-      const auto why = static_cast<StopRequest>(stop.load());
-      if (why != StopRequest::none) throw Interrupted(why, "before rough-scan view " + std::to_string(v.index + 1));
-      const json pj = json::parse(v.pose_json);
-      j.progress.view = v.index + 1;
-      const Acquisition got = acquire_view(positioner_, *head, table_cell, models_.sensor, pj.at("axes").get<std::vector<double>>(),
-                                           pj.at("scan_length_mm").get<double>(), settings_, stop, [&](const std::string& what) {
-                                             j.progress.event = "rough scan " + std::to_string(v.index + 1) + "/" + std::to_string(views.size()) + ": " + what;
-                                             report_(j.progress);
-                                           });
-      journal_.store_scan(*plan, v.index, sp::range_image_to_ply(got.image), "rough scan");
-      journal_.event(j.id, "rough scan " + std::to_string(v.index + 1) + "/" + std::to_string(views.size()) + " stored: " +
-                               std::to_string(got.image.valid_count()) + " samples");
-    }
+    explore(j, *plan, table_cell, sp::with_fixtures(j.truth_table, table_cell), "rough scan", stop);
     // Fuse what the exploration saw; what it did not see closes conservatively (hypothetical).
     sp::FusionOptions fo = settings_.rough_scan.fusion;
     fo.floor_z_mm = 0.0;
@@ -704,6 +876,149 @@ void JobRunner::rough_scan(Job& j, const std::atomic<int>& stop) {
                              " mm mean), normals " + fmt(part.normal_error_mean_rad * 180.0 / M_PI, 1) + "° mean, " +
                              fmt(part.normal_error_p95_rad * 180.0 / M_PI, 1) + "° at the 95th percentile");
   }
+}
+
+void JobRunner::explore(Job& j, std::int64_t plan, const sp::CellModel& table_cell, const sp::TriangleMesh& scene,
+                        const std::string& what, const std::atomic<int>& stop) {
+  const auto views = journal_.views(plan);
+  j.progress.views = static_cast<int>(views.size());
+  auto head = heads_(scene, scene.triangles.size(), table_cell);
+  for (const auto& v : views) {
+    if (v.stored) continue;
+    const auto why = static_cast<StopRequest>(stop.load());
+    if (why != StopRequest::none) throw Interrupted(why, "before " + what + " view " + std::to_string(v.index + 1));
+    const json pj = json::parse(v.pose_json);
+    j.progress.view = v.index + 1;
+    const std::string label = what + " " + std::to_string(v.index + 1) + "/" + std::to_string(views.size());
+    const Acquisition got = acquire_view(positioner_, *head, table_cell, models_.sensor, pj.at("axes").get<std::vector<double>>(),
+                                         pj.at("scan_length_mm").get<double>(), settings_, stop, [&](const std::string& step) {
+                                           j.progress.event = label + ": " + step;
+                                           report_(j.progress);
+                                         });
+    journal_.store_scan(plan, v.index, sp::range_image_to_ply(got.image), what);
+    journal_.event(j.id, label + " stored: " + std::to_string(got.image.valid_count()) + " samples");
+  }
+}
+
+std::optional<std::int64_t> JobRunner::pending_setup(std::int64_t job) {
+  // Plan ids grow as plans are journalled: a further setup's exploration is pending until a plan round
+  // comes after it (the setup's first).
+  std::int64_t exploration = 0, latest_round = 0;
+  for (const auto& [plan, round] : journal_.plan_rounds(job)) {
+    if (round <= -2) exploration = std::max(exploration, plan);
+    else if (round >= 0) latest_round = std::max(latest_round, plan);
+  }
+  if (exploration > latest_round) return exploration;
+  return std::nullopt;
+}
+
+std::optional<JobState> JobRunner::start_setup(Job& j, std::int64_t plan, const std::atomic<int>& stop) {
+  const json info = json::parse(journal_.plan_info(plan));
+  const int setup = info.at("setup").get<int>();
+  const std::string name = "setup " + std::to_string(setup);
+  const Eigen::Isometry3d asked = pose_from(info.at("asked_object_to_table"), "plan info asked_object_to_table");
+  sp::CellModel table_cell = models_.cell;
+  table_cell.object_on_table = Eigen::Isometry3d::Identity();
+  // 1. Exploration of the part as the operator put it down (in simulation: as asked, off by the simulated
+  // operator's error), in the table frame.
+  transition(j, JobState::rough_scanning, name + ": exploring the part as put down (" + std::to_string(journal_.views(plan).size()) + " views)");
+  sp::TriangleMesh on_table = j.truth_object;
+  const Eigen::Isometry3d actual = actual_placement(j, setup, asked);
+  for (auto& v : on_table.vertices) v = actual * v;
+  explore(j, plan, table_cell, sp::with_fixtures(on_table, table_cell), name + " exploration", stop);
+
+  // 2. Alignment to the model so far. The samples go into the object frame as if the part lay exactly as
+  // asked; what rests on the plate (within 1 mm of its top) is the plate, not the part.
+  const Eigen::Isometry3d to_nominal = asked.inverse();
+  std::vector<Eigen::Vector3d> points, normals;
+  for (const auto& sc : journal_.scans(plan)) {
+    std::vector<Eigen::Vector3d> p, n;
+    sp::image_points_normals(sp::range_image_from_ply(journal_.read_scan(sc), sc.file), 2, p, n);
+    for (std::size_t k = 0; k < p.size(); ++k)
+      if (p[k].z() > 1.0) {
+        points.push_back(to_nominal * p[k]);
+        normals.push_back(to_nominal.linear() * n[k]);
+      }
+  }
+  transition(j, JobState::planning, name + ": aligning " + std::to_string(points.size()) + " exploration samples to the model so far");
+  if (!j.cloud) j.cloud = std::make_unique<sp::ModelCloud>(sp::ModelCloud::from_mesh(j.object, 1.0));
+  sp::SetupAlignmentOptions ao = settings_.setup_alignment;
+  ao.axis_point = to_nominal * Eigen::Vector3d::Zero();
+  ao.axis_direction = to_nominal.linear() * Eigen::Vector3d::UnitZ();
+  const sp::SetupAlignmentResult a = points.size() < 100 ? sp::SetupAlignmentResult{} : sp::align_setup(points, normals, *j.cloud, ao);
+  json alignment = {{"ok", a.ok},           {"samples", points.size()}, {"rms_mm", a.rms_mm},       {"overlap", a.overlap},
+                    {"turn_rad", a.turn_rad}, {"tilt_rad", a.tilt_rad},   {"shift_mm", a.shift_mm},   {"free_directions", a.free_directions},
+                    {"plate_conditioning", a.plate_conditioning}, {"ambiguous", a.ambiguous}};
+  if (!a.ok) {
+    const std::string why = points.size() < 100 ? "the exploration saw " + std::to_string(points.size()) + " samples of the part above the plate"
+                                                : a.why;
+    journal_.event(j.id, name + ": alignment refused: " + why);
+    finish(j, JobState::stalled, name + ": the part as put down could not be aligned to the model so far, so nothing of it was merged: " +
+                                     why + "; what the setups before measured is kept");
+    return JobState::stalled;
+  }
+  const Eigen::Isometry3d estimated = asked * a.correction.inverse();
+  {
+    // Simulation: how well the alignment found where the part really lies (at the part's centre).
+    const Eigen::Isometry3d miss = estimated.inverse() * actual;
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+    for (const auto& v : j.object.vertices) centre += v / static_cast<double>(j.object.vertices.size());
+    const Eigen::Isometry3d error = actual * asked.inverse();
+    alignment["sim_operator_shift_mm"] = error.translation().norm();
+    alignment["sim_operator_turn_deg"] = Eigen::AngleAxisd(error.linear()).angle() * 180.0 / M_PI;
+    alignment["sim_residual_mm"] = (miss * centre - centre).norm();
+    alignment["sim_residual_deg"] = Eigen::AngleAxisd(miss.linear()).angle() * 180.0 / M_PI;
+  }
+  journal_.event(j.id, name + ": aligned (" + std::to_string(points.size()) + " samples, residual " + fmt(a.rms_mm, 3) + " mm, turned " +
+                           fmt(a.turn_rad * 180.0 / M_PI, 2) + "° and shifted " + fmt(a.shift_mm, 2) + " mm from the placement asked" +
+                           (alignment.contains("sim_residual_mm") ? "; against the simulated placement off by " +
+                                                                        fmt(alignment["sim_residual_mm"].get<double>(), 3) + " mm, " +
+                                                                        fmt(alignment["sim_residual_deg"].get<double>(), 3) + "°"
+                                                                  : "") +
+                           ")");
+
+  // 3. The setup's first plan: only what is still unmeasured, with the part where the alignment found it.
+  const std::vector<std::uint8_t> measured = j.coverage->measured_rows();
+  sp::PlannerSettings settings = j.settings;
+  if (settings.cover.mode == sp::CoverMode::constrained) settings.cover.mode = sp::CoverMode::greedy;  // views register to the model
+  sp::CellModel placed = models_.cell;
+  placed.object_on_table.linear() = estimated.linear();
+  placed.object_on_table.translation() = sp::plate_offset_of(j.object, estimated);
+  const sp::ViewPlan p = plan_or_stop([&] {
+    return sp::plan_views(j.object, models_.sensor, j.spec, settings, j.rough_options, settings_.planner_threads, &placed, &measured,
+                          nullptr, &stop);
+  }, stop);
+  if (p.views.empty()) {
+    finish(j, JobState::stalled, name + ": no view of the part in this pose measures what is left");
+    return JobState::stalled;
+  }
+  double rest_area = 0.0;
+  for (std::size_t r = 0; r < measured.size(); ++r) rest_area += measured[r] ? 0.0 : j.rough->area_mm2[r];
+  const double est_rest = p.cover.cumulative_fraction.empty() ? 0.0 : p.cover.cumulative_fraction.back();
+  int rounds = 0;
+  for (const auto& [pl, round] : journal_.plan_rounds(j.id)) rounds += round >= 0;
+  // Unmeasurable from here on: what no view of the part in this pose measures and no setup before did.
+  std::vector<std::uint32_t> unmeasurable;
+  for (auto r : p.cover.unmeasurable_rows)
+    if (!measured[r]) unmeasurable.push_back(r);
+  const json rinfo = {{"round", rounds},
+                      {"setup", setup},
+                      {"object_on_table", row_major_json(p.cell->object_on_table.matrix())},
+                      {"asked_object_to_table", info.at("asked_object_to_table")},
+                      {"alignment", alignment},
+                      {"rows", j.rough->size()},
+                      {"unmeasurable_rows", unmeasurable},
+                      {"estimated", est_rest},
+                      {"estimated_total", j.progress.measured + est_rest * rest_area / j.rough->total_area_mm2},
+                      {"measured_before", j.progress.measured},
+                      {"candidates", p.candidates},
+                      {"views", p.views.size()},
+                      {"predicted_rows", p.predicted_rows},
+                      {"view_rows", p.view_rows},
+                      {"predicted_gain_mm2", p.predicted_gain_mm2},
+                      {"plan_s", p.times.total_s()}};
+  journal_.add_plan(j.id, rounds, view_records(p), rinfo.dump());
+  return std::nullopt;
 }
 
 void JobRunner::execute_view(Job& j, std::int64_t plan, const ViewRecord& v, const std::atomic<int>& stop) {

@@ -30,6 +30,7 @@
 #include "planner/plan.hpp"
 #include "planner/reconstruction/registration.hpp"
 #include "planner/reconstruction/rough_scan.hpp"
+#include "planner/reconstruction/setup_alignment.hpp"
 
 namespace scancell::daemon {
 
@@ -46,6 +47,21 @@ struct JobSettings {
   /// a second setup: the stable resting pose that lets the cell measure most of the rest, named in the
   /// result with a picture (next_setup.png). 0: never.
   double next_setup_min_area_mm2 = 100.0;
+  /// Setups a job may use unless its request says (issue 20): with 2 or more, a setup that ends with the
+  /// next-setup advice above waits for the operator (awaiting_operator) instead of ending the job.
+  int max_setups = 1;
+  /// Simulation: how far off the simulated operator puts the part down in a further setup, drawn uniformly
+  /// per job and setup within ± these: a shift on the plate (mm) and a turn about the table axis (rad).
+  double sim_placement_error_mm = 0.0;
+  double sim_placement_error_rad = 0.0;
+  /// Exploration views of a further setup (aligned to the model so far): turntable steps × elevations.
+  planner::ExplorationOptions setup_exploration = [] {
+    planner::ExplorationOptions o;
+    o.table_steps = 6;
+    o.tilts_rad = {0.75, 0.35};
+    return o;
+  }();
+  planner::SetupAlignmentOptions setup_alignment;
   planner::CoverageOptions coverage;               // when a rough-model row counts as measured
   std::chrono::milliseconds move_timeout{60000};   // one positioning move
   double scan_speed_mm_s = 0.0;                    // sweep speed; 0: the cell's scan_speed_mm_s
@@ -114,7 +130,22 @@ class JobRunner {
   void execute_view(Job& j, std::int64_t plan, const ViewRecord& v, const std::atomic<int>& stop);
   /// The rough scan of a job given a bounding box: exploration views, stored, fused into jobs/ID/rough.off.
   void rough_scan(Job& j, const std::atomic<int>& stop);
-  void finish(Job& j, JobState state, const std::string& cause);
+  /// The end of a job, or of a setup: with setups left and enough unmeasured for a next one (issue 20), the
+  /// job waits for the operator to turn the part over (awaiting_operator); otherwise it finishes in `state`.
+  JobState end_setup(Job& j, JobState state, const std::string& cause);
+  /// A further setup the operator has confirmed: its exploration views (the part as the operator put it
+  /// down), aligned to the model so far, then the setup's first plan, journalled. An end state if the
+  /// alignment is refused or nothing is left to plan.
+  std::optional<JobState> start_setup(Job& j, std::int64_t exploration_plan, const std::atomic<int>& stop);
+  /// Executes the views of a plan of axis targets (rough scan, setup exploration) that are not stored yet.
+  void explore(Job& j, std::int64_t plan, const planner::CellModel& table_cell, const planner::TriangleMesh& scene, const std::string& what,
+               const std::atomic<int>& stop);
+  void finish(Job& j, JobState state, const std::string& cause, const nlohmann::json* advice = nullptr);
+  /// The latest further setup's exploration plan not yet followed by the setup's first plan round.
+  std::optional<std::int64_t> pending_setup(std::int64_t job);
+  /// Simulation: where the part really lies in setup `setup` (the placement asked, off by the simulated
+  /// operator's error, jobs.sim_placement_error_*).
+  Eigen::Isometry3d actual_placement(const Job& j, int setup, const Eigen::Isometry3d& asked) const;
   /// Issue 20: the stable resting pose a second setup should use, for the result (planner::plan_next_setup).
   nlohmann::json next_setup(Job& j);
   /// Every executed round's plan info, with the rows its views' sweeps passed without a profile (held_rows).

@@ -18,7 +18,8 @@ namespace {
 
 const std::map<JobState, const char*> kNames = {
     {JobState::queued, "queued"},     {JobState::rough_scanning, "rough_scanning"}, {JobState::planning, "planning"}, {JobState::executing, "executing"},
-    {JobState::verifying, "verifying"}, {JobState::replanning, "replanning"}, {JobState::paused, "paused"}, {JobState::done, "done"},
+    {JobState::verifying, "verifying"}, {JobState::replanning, "replanning"}, {JobState::paused, "paused"},
+    {JobState::awaiting_operator, "awaiting_operator"}, {JobState::done, "done"},
     {JobState::stalled, "stalled"},   {JobState::aborted, "aborted"},   {JobState::faulted, "faulted"},
     {JobState::failed, "failed"}};
 
@@ -145,15 +146,20 @@ const std::vector<JobTransitions>& job_transitions() {
       // queued: started (its first active state; a calibration run starts executing), or paused or aborted
       // while waiting, or faulted or failed on its input before anything moved.
       {S::queued, with_active({S::paused, S::aborted, S::faulted, S::failed})},
-      // active: round and round, then an ending; paused at a safe point; faulted by hardware or input.
+      // active: round and round, then an ending; paused at a safe point; faulted by hardware or input; a
+      // setup ended with a next one to measure: the operator is to turn the part over (verifying or
+      // replanning end a setup, as they end a job).
       {S::rough_scanning, with_active({S::paused, S::done, S::stalled, S::aborted, S::faulted, S::failed})},
       {S::planning, with_active({S::paused, S::done, S::stalled, S::aborted, S::faulted, S::failed})},
       {S::executing, with_active({S::paused, S::done, S::stalled, S::aborted, S::faulted, S::failed})},
-      {S::verifying, with_active({S::paused, S::done, S::stalled, S::aborted, S::faulted, S::failed})},
-      {S::replanning, with_active({S::paused, S::done, S::stalled, S::aborted, S::faulted, S::failed})},
+      {S::verifying, with_active({S::paused, S::awaiting_operator, S::done, S::stalled, S::aborted, S::faulted, S::failed})},
+      {S::replanning, with_active({S::paused, S::awaiting_operator, S::done, S::stalled, S::aborted, S::faulted, S::failed})},
       // paused and faulted: resume queues the job again; abort ends it.
       {S::paused, {S::queued, S::aborted}},
       {S::faulted, {S::queued, S::aborted}},
+      // awaiting_operator: the operator's `continue` (the part turned over) queues the next setup; abort ends
+      // the job with what the setups so far measured.
+      {S::awaiting_operator, {S::queued, S::aborted}},
       // done, stalled, aborted, failed: final.
   };
   return t;

@@ -30,6 +30,8 @@ enum class JobState {
   verifying,       // active: measured coverage of the rough model after a round
   replanning,      // active: a further round for the rows still open
   paused,          // stopped at a safe point by request; resume queues it again, abort ends it
+  awaiting_operator,  // a setup is done and the operator is to turn the part over as journalled (issue 20);
+                      // `continue` queues it again (the next setup), abort ends it
   done,            // final: the specification is met
   stalled,         // final: nothing more can be measured (named rows, rounds, gain), the rest reported
   aborted,         // final: by request

@@ -2,9 +2,10 @@
 # make demo: a whole simulated scan job end to end. Starts five simulated Modbus TCP drives (scancell-sim on
 # loopback), starts scancelld on them with the simulated line scanner, submits a job on the mushroom's rough
 # model, watches it with scancellctl and prints the result table (views, measured coverage, m_v verified
-# against the ground-truth mesh, time, coverage picture). Usage: scripts/demo.sh BUILD_DIR [rough]
+# against the ground-truth mesh, time, coverage picture). Usage: scripts/demo.sh BUILD_DIR [rough|flip]
 # With "rough" the job starts from nothing but the object's bounding box: rough scan, fusion into a rough
-# model, plan, execute, register, replan (make demo-rough).
+# model, plan, execute, register, replan (make demo-rough). With "flip" the job measures the elephant in two
+# setups, turned over by the (simulated) operator in between (make demo-flip).
 set -euo pipefail
 BUILD=${1:-build}
 MODE=${2:-mesh}
@@ -32,7 +33,21 @@ for _ in $(seq 200); do [ -S "$D/control.sock" ] && break; sleep 0.05; done
 [ -S "$D/control.sock" ] || { echo "demo: scancelld did not start:"; cat "$D/scancelld.log"; exit 1; }
 echo "== scancelld: $(head -1 "$D/scancelld.log")"
 set +e
-if [ "$MODE" = rough ]; then
+if [ "$MODE" = flip ]; then
+  # Issue 20: two setups. The elephant stands on its feet, which the plate hides; after setup 1 the job asks
+  # for the part to be turned over (awaiting_operator), the simulated operator puts it down within 8 mm and
+  # 0.2 rad of the pose asked, and setup 2 aligns it to the model and measures the rest.
+  echo "== submit: tests/data/elephant.off, longest side 200 mm, two setups"
+  "$BUILD/tools/scancellctl" --socket "$D/control.sock" submit --mesh tests/data/elephant.off --fit-mm 200 --setups 2 --watch
+  RC=$?
+  if [ "$RC" = 15 ]; then
+    echo "== the operator turns the part over as asked (the picture: $D/data/jobs/1/next_setup.png), then:"
+    echo "   scancellctl continue 1"
+    "$BUILD/tools/scancellctl" --socket "$D/control.sock" continue 1 > /dev/null
+    "$BUILD/tools/scancellctl" --socket "$D/control.sock" watch 1
+    RC=$?
+  fi
+elif [ "$MODE" = rough ]; then
   echo "== submit: nothing but a 125 x 125 x 60 mm box on the table (the simulated cell holds the mushroom, 120 mm)"
   "$BUILD/tools/scancellctl" --socket "$D/control.sock" submit --bbox-mm 125,125,60 --truth tests/data/mushroom.off \
     --fit-mm 120 --rough-vertices 1500 --watch

@@ -1,11 +1,12 @@
 // scancellctl: the command-line client of scancelld's control socket (docs/daemon.md).
 //   scancellctl [--socket PATH] [--json] submit --mesh FILE [--fit-mm L] [--spec FILE] [--settings FILE]
 //                                          [--truth FILE] [--rough-vertices N] [--placement auto|as_given] [--watch]
-//   scancellctl status [JOB] | list | watch JOB | pause JOB | resume JOB | abort JOB | reload
+//   scancellctl status [JOB] | list | watch JOB | pause JOB | resume JOB | abort JOB | continue JOB | reload
 //   scancellctl export JOB --out DIR [--with-scans]
 //   scancellctl calibrate sensor|turntable_axis|positioner [--watch]
 // Exit codes: 0 success (watch: the job is done), 1 the daemon refused the request (export: or the copy failed), 2 usage, 3 cannot reach
-// the daemon; watch: 10 stalled, 11 aborted, 12 faulted, 13 paused, 14 failed (a calibration on bad data).
+// the daemon; watch: 10 stalled, 11 aborted, 12 faulted, 13 paused, 14 failed (a calibration on bad data),
+// 15 awaiting the operator (turn the part over as the job says, then continue).
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -80,6 +81,7 @@ int outcome_code(const std::string& state) {
   if (state == "faulted") return 12;
   if (state == "paused") return 13;
   if (state == "failed") return 14;
+  if (state == "awaiting_operator") return 15;
   return 1;
 }
 
@@ -103,8 +105,16 @@ void print_result(const json& reply, double seconds) {
     return;
   }
   auto num = [&](const char* k) { return r.contains(k) ? r[k].get<double>() : std::nan(""); };
+  if (r.value("state", std::string()) == "awaiting_operator") {  // between setups: what the operator is to do
+    std::printf("  %-34s %d, measured %.4f of the rough model\n", "setup done", r.value("setup", 0), num("measured_coverage"));
+    std::printf("  %-34s %s\n", "operator", r.value("instruction", std::string()).c_str());
+    return;
+  }
   std::printf("  %-34s %d\n", "views executed", r.value("views", 0));
   std::printf("  %-34s %d\n", "plan rounds", r.value("rounds", 0));
+  if (r.contains("cell_time_s"))
+    std::printf("  %-34s %.0f s (moves %.0f s, sweeps %.0f s)\n", "cell time at the cell's speeds", num("cell_time_s"), num("cell_move_s"),
+                num("cell_scan_s"));
   std::printf("  %-34s %.4f\n", "estimated coverage (planner)", num("estimated_coverage"));
   std::printf("  %-34s %.4f\n", "measured coverage (rough model)", num("measured_coverage"));
   if (r.contains("rough_model")) {
@@ -146,6 +156,20 @@ void print_result(const json& reply, double seconds) {
   if (r.contains("next_setup"))
     std::printf("  %-34s %s%s%s\n", "next setup", r["next_setup"].value("reason", r["next_setup"].value("error", std::string())).c_str(),
                 r["next_setup"].contains("picture") ? "; picture " : "", r["next_setup"].value("picture", std::string()).c_str());
+  if (r.contains("setups"))
+    for (const auto& st : r["setups"]) {
+      std::printf("  %-34s %d views", ("setup " + std::to_string(st.value("setup", 0))).c_str(), st.value("views", 0));
+      if (st.contains("measured_coverage_before")) std::printf(", from %.4f of the rough model measured", st.value("measured_coverage_before", 0.0));
+      if (st.contains("resting_pose")) std::printf(", resting pose %d", st.value("resting_pose", 0));
+      if (st.contains("alignment")) {
+        const json& a = st["alignment"];
+        std::printf(", aligned: residual %.3f mm, turned %.2f deg, shifted %.2f mm", a.value("rms_mm", NAN), a.value("turn_rad", NAN) * 180.0 / M_PI,
+                    a.value("shift_mm", NAN));
+        if (a.contains("sim_residual_mm"))
+          std::printf(" (simulation: placement found to %.3f mm, %.3f deg)", a.value("sim_residual_mm", NAN), a.value("sim_residual_deg", NAN));
+      }
+      std::printf("\n");
+    }
   if (r.contains("unmeasured_file")) std::printf("  %-34s %s\n", "unmeasured rows", r["unmeasured_file"].get<std::string>().c_str());
 }
 
@@ -275,7 +299,7 @@ int export_job(Connection& c, std::int64_t job, const std::filesystem::path& dir
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"scancellctl: control scancelld (submit, status, list, watch, pause, resume, abort, reload, export)"};
+  CLI::App app{"scancellctl: control scancelld (submit, status, list, watch, pause, resume, abort, continue, reload, export)"};
   const char* env = std::getenv("SCANCELL_SOCKET");
   std::string socket = env ? env : "/run/scancell/control.sock";
   bool as_json = false;
@@ -303,6 +327,11 @@ int main(int argc, char** argv) {
                      "how the object rests on the plate: auto (plan its stable resting poses, keep the best; the result says "
                      "how to place it) or as_given (default: the daemon's settings)")
       ->check(CLI::IsMember({"auto", "as_given"}));
+  int setups = 0;
+  submit->add_option("--setups", setups,
+                     "setups the job may use: after the first, with enough left unmeasured, it waits for the part to be "
+                     "turned over as it says (then: scancellctl continue JOB) (default: the daemon's jobs.max_setups)")
+      ->check(CLI::Range(1, 4));
   submit->add_flag("--watch", then_watch, "then watch the job to its end");
 
   std::int64_t job = 0;
@@ -311,10 +340,11 @@ int main(int argc, char** argv) {
   app.add_subcommand("list", "the latest jobs");
   auto* w = app.add_subcommand("watch", "live progress of a job; exits with its outcome");
   w->add_option("job", job, "job id")->required();
-  CLI::App* ctl[3];
-  const char* names[3] = {"pause", "resume", "abort"};
-  const char* help[3] = {"pause at the next safe point", "continue a paused or faulted job (clears drive faults)", "end a job"};
-  for (int k = 0; k < 3; ++k) {
+  CLI::App* ctl[4];
+  const char* names[4] = {"pause", "resume", "abort", "continue"};
+  const char* help[4] = {"pause at the next safe point", "continue a paused or faulted job (clears drive faults)", "end a job",
+                         "confirm that the part was turned over as the job's next setup asks (a job awaiting the operator)"};
+  for (int k = 0; k < 4; ++k) {
     ctl[k] = app.add_subcommand(names[k], help[k]);
     ctl[k]->add_option("job", job, "job id")->required();
   }
@@ -354,6 +384,7 @@ int main(int argc, char** argv) {
       if (!truth.empty()) req["truth"] = absolute(truth);
       if (rough_vertices > 0) req["rough_vertices"] = rough_vertices;
       if (!placement.empty()) req["placement"] = placement;
+      if (setups > 0) req["setups"] = setups;
     } else if (cmd == "calibrate") {
       req["kind"] = kind;
     } else if (cmd == "status") {

@@ -233,4 +233,10 @@ Eigen::Isometry3d place_on_plate(const TriangleMesh& mesh, const Eigen::Matrix3d
   return t;
 }
 
+Eigen::Vector3d plate_offset_of(const TriangleMesh& mesh, const Eigen::Isometry3d& pose) {
+  Eigen::AlignedBox3d box;
+  for (const auto& v : mesh.vertices) box.extend(pose.linear() * v);
+  return pose.translation() + Eigen::Vector3d(box.center().x(), box.center().y(), box.min().z());
+}
+
 }  // namespace scancell::planner

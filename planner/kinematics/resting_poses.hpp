@@ -79,5 +79,9 @@ RestingPoses resting_poses(const TriangleMesh& mesh, const RestingPoseOptions& o
 /// turntable axis and its lowest point on the table top, then moved by `offset_mm` (table frame).
 Eigen::Isometry3d place_on_plate(const TriangleMesh& mesh, const Eigen::Matrix3d& rotation,
                                  const Eigen::Vector3d& offset_mm = Eigen::Vector3d::Zero());
+/// The offset that makes place_on_plate(mesh, pose.linear(), offset) return `pose`: how a placement known
+/// exactly (a setup aligned to the model, off centre and turned as the operator put it down) is handed to
+/// the planner, which places by rotation and offset.
+Eigen::Vector3d plate_offset_of(const TriangleMesh& mesh, const Eigen::Isometry3d& pose);
 
 }  // namespace scancell::planner

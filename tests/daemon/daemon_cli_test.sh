@@ -98,6 +98,9 @@ ctl abort 1 > /dev/null || fail "abort"
 ctl watch 1 > "$W/watch2.log"; rc=$?
 [ $rc = 11 ] || fail "watch after abort: exit $rc, want 11 (aborted)"
 out=$(ctl abort 1 2>&1); [ $? = 1 ] && echo "$out" | grep -q "already aborted" || fail "second abort: $out"
+# Issue 20: continue confirms a turned-over part; a job not awaiting the operator is refused, naming its state.
+out=$(ctl continue 1 2>&1); [ $? = 1 ] && echo "$out" | grep -q "job 1 is aborted, not awaiting the operator" || fail "continue of an aborted job: $out"
+out=$(ctl submit --mesh "$SRC/tests/data/cube50.off" --setups 9 2>&1); [ $? = 2 ] || fail "--setups 9 accepted: $out"
 # Issue 19: the aborted job hands over what it measured: its product, plans, events and range images.
 out=$(ctl export 1 --out "$W/export1" --with-scans 2>&1) || fail "export: $out"
 for f in cloud.ply model.ply job.json plans.json events.txt; do [ -s "$W/export1/$f" ] || fail "export lacks $f: $out"; done

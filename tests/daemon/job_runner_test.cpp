@@ -95,9 +95,15 @@ struct SimCell : ::testing::Test {
   // Planning the next setup costs four plans at a job's end (a minute under ASan across these tests): only
   // the test that checks it asks for it.
   double next_setup_min_area_mm2 = 0.0;
+  int max_setups = 1;
+  double sim_placement_error_mm = 0.0, sim_placement_error_rad = 0.0;
+  std::function<void(const Progress&)> on_report;
 
   JobRunner runner() {
     JobSettings s;
+    s.max_setups = max_setups;
+    s.sim_placement_error_mm = sim_placement_error_mm;
+    s.sim_placement_error_rad = sim_placement_error_rad;
     s.scan_speed_mm_s = scan_speed;
     s.register_views = register_views;
     s.max_rounds = max_rounds;
@@ -109,6 +115,7 @@ struct SimCell : ::testing::Test {
     return JobRunner(*journal, models, io->positioner, heads, s, [this](const Progress& p) {
       std::lock_guard<std::mutex> lock(mu);
       reports.push_back(p);
+      if (on_report) on_report(p);
     });
   }
   std::int64_t submit(const std::string& mesh, double fit_mm = 0.0) {
@@ -726,6 +733,70 @@ TEST_F(SimCell, FromABoundingBoxRoughScanThenPlanAndMeasure) {
   EXPECT_LT(q["seen_normal_error_mean_rad"].get<double>(), 0.2);
   EXPECT_TRUE(fs::exists(dir / "data" / "jobs" / std::to_string(job) / "rough.hypothetical.xyz"));
   EXPECT_TRUE(journal->check().empty());
+}
+
+TEST_F(SimCell, TwoSetupsTurnThePartOverAlignItAndMeasureWhatRestedOnThePlate) {
+  // Issue 20. The elephant (100 mm) stands on its feet: setup 1 cannot measure what rests on the plate or
+  // faces it. The job then waits for the operator with the resting pose to use; the simulated operator puts
+  // it down off by up to 8 mm and 12° on the plate; setup 2 explores it, aligns the samples to the model
+  // and measures the rest. A stop during the exploration resumes without repeating a stored view.
+  JobRequest r;
+  r.mesh = src("tests/data/elephant.off");
+  r.fit_mm = 100.0;
+  r.rough_vertices = 600;
+  r.setups = 2;
+  validate_request(r);
+  const auto job = journal->create_job("elephant", r.to_json().dump());
+  max_rounds = 1;  // one round per setup: the setups are what is tested
+  next_setup_min_area_mm2 = 100.0;
+  sim_placement_error_mm = 8.0;
+  sim_placement_error_rad = 0.21;
+  std::atomic<int> stop{0};
+  {
+    auto runner_ = runner();
+    ASSERT_EQ(runner_.run(job, stop), JobState::awaiting_operator) << journal->job(job).cause;
+  }
+  const auto waiting = nlohmann::json::parse(journal->job(job).result_json);
+  EXPECT_EQ(waiting["state"], "awaiting_operator");
+  EXPECT_THAT(waiting["instruction"].get<std::string>(), HasSubstr("scancellctl continue " + std::to_string(job)));
+  EXPECT_THAT(journal->job(job).cause, HasSubstr("turn the part over"));
+  const double after_setup1 = waiting["measured_coverage"].get<double>();
+  // Not runnable until the operator confirms.
+  EXPECT_EQ(runner().run(job, stop), JobState::awaiting_operator);
+
+  // The operator's continue (what the daemon's `continue` does), then a stop at the 4th exploration view.
+  journal->set_state(job, JobState::queued, "continued");
+  on_report = [&](const Progress& p) {
+    if (p.event.rfind("setup 2 exploration 4/", 0) == 0) stop = static_cast<int>(StopRequest::shutdown);
+  };
+  { EXPECT_NE(runner().run(job, stop), JobState::done); }
+  on_report = nullptr;
+  stop = 0;
+  std::int64_t exploration = 0;
+  for (const auto& [plan, round] : journal->plan_rounds(job))
+    if (round == -2) exploration = plan;
+  ASSERT_GT(exploration, 0);
+  const std::size_t explored_before = journal->scans(exploration).size();
+  EXPECT_GE(explored_before, 3u);
+  EXPECT_LT(explored_before, journal->views(exploration).size());
+
+  const JobState end = runner().run(job, stop);
+  ASSERT_TRUE(end == JobState::done || end == JobState::stalled) << journal->job(job).cause;
+  EXPECT_EQ(journal->scans(exploration).size(), journal->views(exploration).size());  // each view stored once
+  const auto result = nlohmann::json::parse(journal->job(job).result_json);
+  ASSERT_TRUE(result.contains("setups")) << result.dump();
+  ASSERT_EQ(result["setups"].size(), 2u) << result["setups"].dump();
+  const auto& a = result["setups"][1]["alignment"];
+  std::cout << "two setups: measured " << after_setup1 << " -> " << result["measured_coverage"] << ", verified m_v "
+            << result["verified_mv"] << ", alignment " << a.dump() << "\n";
+  ASSERT_TRUE(a["ok"].get<bool>()) << a.dump();
+  EXPECT_GT(a["sim_operator_turn_deg"].get<double>(), 1.0);  // the operator was off, and the alignment found it
+  EXPECT_LT(a["sim_residual_mm"].get<double>(), 0.1);
+  EXPECT_LT(a["sim_residual_deg"].get<double>(), 0.1);
+  EXPECT_GT(result["setups"][1]["views"].get<int>(), 0);
+  // What setup 2 measured is where it is: the views registered and the ground truth agrees.
+  EXPECT_GT(result["measured_coverage"].get<double>(), after_setup1 + 0.02);
+  EXPECT_GT(result["verified_mv"].get<double>(), 0.95);
 }
 
 TEST(JobRequest, BadInputIsRefusedNamingTheFile) {
