@@ -205,7 +205,11 @@ json JobRunner::next_setup(Job& j) {
     for (auto& v : turned.vertices) v = n.object_to_table * v;
     const auto png = settings_.jobs_dir / std::to_string(j.id) / "next_setup.png";
     std::filesystem::create_directories(png.parent_path());
-    sp::write_measurability_png(turned, measured, png.string());
+    const std::string title = "job " + std::to_string(j.id) + ", next setup: rest the part with " + down_side(down) + " (resting pose " +
+                              std::to_string(n.pose + 1) + ")\nseen from the table's axes (from -Z: what rests on the plate); " +
+                              fmt(n.predicted_gain_mm2, 0) + " of the " + fmt(n.unmeasured_area_mm2, 0) + " mm2 left predicted in " +
+                              std::to_string(n.views) + " views";
+    if (const std::string why = sp::write_coverage_picture(turned, measured, title, png); !why.empty()) out["picture_error"] = why;
     out["picture"] = png.string();
     return out;
   } catch (const scancell::PlanCancelled& e) {
@@ -257,6 +261,15 @@ JobState JobRunner::end_setup(Job& j, JobState state, const std::string& cause) 
   }
   std::vector<std::string> poses;
   for (const auto& v : views) poses.push_back(json({{"axes", v.q}, {"scan_length_mm", v.scan_length_mm}}).dump());
+  // Simulation: what this setup left, against the truth (the same verified m_v the result reports at the end).
+  json truth_figures = json::object();
+  {
+    std::vector<sp::RangeImage> images;
+    for (auto& v : load_job_views(journal_, j.id)) images.push_back(std::move(v.image));
+    const bool with_truth = !images.empty() && !j.truth_object.vertices.empty() &&
+                            std::all_of(images.begin(), images.end(), [](const sp::RangeImage& im) { return im.truth.size() == im.samples.size(); });
+    if (with_truth) truth_figures["verified_mv"] = sp::verify_images(j.truth_object, j.spec, images).mv;
+  }
   const std::string instruction = "turn the part over: " + down_side(Eigen::Vector3d(advice.at("down_object")[0].get<double>(),
                                                                                      advice.at("down_object")[1].get<double>(),
                                                                                      advice.at("down_object")[2].get<double>())) +
@@ -271,6 +284,7 @@ JobState JobRunner::end_setup(Job& j, JobState state, const std::string& cause) 
                           {"instruction", instruction},
                           {"previous_setup_end", {{"state", to_string(state)}, {"cause", cause}}},
                           {"measured_coverage_before", j.progress.measured},
+                          {"previous_setup_truth", truth_figures},
                           {"skipped", skipped}})
                         .dump());
   journal_.set_result(j.id, json({{"state", "awaiting_operator"},
@@ -294,6 +308,9 @@ json setups_json(Journal& journal, std::int64_t job) {
   for (const auto& [plan, round] : plans) {
     const json info = json::parse(journal.plan_info(plan));
     if (round <= -2) {
+      // What the setup before left, in simulation against the truth.
+      if (!out.empty() && info.contains("previous_setup_truth") && info.at("previous_setup_truth").contains("verified_mv"))
+        out.back()["verified_mv_at_end"] = info.at("previous_setup_truth").at("verified_mv");
       out.push_back({{"setup", info.at("setup")},
                      {"resting_pose", info.at("advice").value("resting_pose", 0)},
                      {"asked_object_to_table_row_major", info.at("asked_object_to_table")},
@@ -926,14 +943,30 @@ std::optional<JobState> JobRunner::start_setup(Job& j, std::int64_t plan, const 
   const Eigen::Isometry3d actual = actual_placement(j, setup, asked);
   for (auto& v : on_table.vertices) v = actual * v;
   explore(j, plan, table_cell, sp::with_fixtures(on_table, table_cell), name + " exploration", stop);
+  // 2. Alignment to the model so far; a refusal ends the job with what the setups before measured.
+  json alignment;
+  const auto estimated = align_to_model(j, name, plan, asked, actual, alignment);
+  if (!estimated) {
+    finish(j, JobState::stalled, name + ": the part as put down could not be aligned to the model so far, so nothing of it was merged: " +
+                                     alignment.at("why").get<std::string>() + "; what the setups before measured is kept");
+    return JobState::stalled;
+  }
+  // 3. The setup's first plan.
+  return plan_setup(j, setup, info, *estimated, alignment, stop);
+}
 
-  // 2. Alignment to the model so far. The samples go into the object frame as if the part lay exactly as
-  // asked; what rests on the plate (within 1 mm of its top) is the plate, not the part.
+std::optional<Eigen::Isometry3d> JobRunner::align_to_model(Job& j, const std::string& name, std::int64_t plan, const Eigen::Isometry3d& asked,
+                                                           const Eigen::Isometry3d& actual, json& alignment) {
+  // The samples go into the object frame as if the part lay exactly as asked; what lies within 1 mm of the
+  // plate's top is the plate, not the part.
   const Eigen::Isometry3d to_nominal = asked.inverse();
   std::vector<Eigen::Vector3d> points, normals;
+  bool simulated = true;  // every exploration image carries the simulated scanner's truth
   for (const auto& sc : journal_.scans(plan)) {
+    const sp::RangeImage img = sp::range_image_from_ply(journal_.read_scan(sc), sc.file);
+    simulated = simulated && img.truth.size() == img.samples.size();
     std::vector<Eigen::Vector3d> p, n;
-    sp::image_points_normals(sp::range_image_from_ply(journal_.read_scan(sc), sc.file), 2, p, n);
+    sp::image_points_normals(img, 2, p, n);
     for (std::size_t k = 0; k < p.size(); ++k)
       if (p[k].z() > 1.0) {
         points.push_back(to_nominal * p[k]);
@@ -945,39 +978,42 @@ std::optional<JobState> JobRunner::start_setup(Job& j, std::int64_t plan, const 
   sp::SetupAlignmentOptions ao = settings_.setup_alignment;
   ao.axis_point = to_nominal * Eigen::Vector3d::Zero();
   ao.axis_direction = to_nominal.linear() * Eigen::Vector3d::UnitZ();
-  const sp::SetupAlignmentResult a = points.size() < 100 ? sp::SetupAlignmentResult{} : sp::align_setup(points, normals, *j.cloud, ao);
-  json alignment = {{"ok", a.ok},           {"samples", points.size()}, {"rms_mm", a.rms_mm},       {"overlap", a.overlap},
-                    {"turn_rad", a.turn_rad}, {"tilt_rad", a.tilt_rad},   {"shift_mm", a.shift_mm},   {"free_directions", a.free_directions},
-                    {"plate_conditioning", a.plate_conditioning}, {"ambiguous", a.ambiguous}};
+  constexpr std::size_t kMinSamples = 100;
+  const sp::SetupAlignmentResult a = points.size() < kMinSamples ? sp::SetupAlignmentResult{} : sp::align_setup(points, normals, *j.cloud, ao);
+  alignment = {{"ok", a.ok},           {"samples", points.size()}, {"rms_mm", a.rms_mm},       {"overlap", a.overlap},
+               {"turn_rad", a.turn_rad}, {"tilt_rad", a.tilt_rad},   {"shift_mm", a.shift_mm},   {"free_directions", a.free_directions},
+               {"plate_conditioning", a.plate_conditioning}, {"ambiguous", a.ambiguous}};
   if (!a.ok) {
-    const std::string why = points.size() < 100 ? "the exploration saw " + std::to_string(points.size()) + " samples of the part above the plate"
-                                                : a.why;
-    journal_.event(j.id, name + ": alignment refused: " + why);
-    finish(j, JobState::stalled, name + ": the part as put down could not be aligned to the model so far, so nothing of it was merged: " +
-                                     why + "; what the setups before measured is kept");
-    return JobState::stalled;
+    alignment["why"] = points.size() < kMinSamples
+                           ? "the exploration saw " + std::to_string(points.size()) + " samples of the part above the plate"
+                           : a.why;
+    journal_.event(j.id, name + ": alignment refused: " + alignment["why"].get<std::string>());
+    return std::nullopt;
   }
   const Eigen::Isometry3d estimated = asked * a.correction.inverse();
-  {
+  std::string truth;
+  if (simulated) {
     // Simulation: how well the alignment found where the part really lies (at the part's centre).
-    const Eigen::Isometry3d miss = estimated.inverse() * actual;
+    const Eigen::Isometry3d miss = estimated.inverse() * actual, error = actual * asked.inverse();
     Eigen::Vector3d centre = Eigen::Vector3d::Zero();
     for (const auto& v : j.object.vertices) centre += v / static_cast<double>(j.object.vertices.size());
-    const Eigen::Isometry3d error = actual * asked.inverse();
     alignment["sim_operator_shift_mm"] = error.translation().norm();
     alignment["sim_operator_turn_deg"] = Eigen::AngleAxisd(error.linear()).angle() * 180.0 / M_PI;
     alignment["sim_residual_mm"] = (miss * centre - centre).norm();
     alignment["sim_residual_deg"] = Eigen::AngleAxisd(miss.linear()).angle() * 180.0 / M_PI;
+    truth = "; against the simulated placement off by " + fmt(alignment["sim_residual_mm"].get<double>(), 3) + " mm, " +
+            fmt(alignment["sim_residual_deg"].get<double>(), 3) + "°";
   }
   journal_.event(j.id, name + ": aligned (" + std::to_string(points.size()) + " samples, residual " + fmt(a.rms_mm, 3) + " mm, turned " +
                            fmt(a.turn_rad * 180.0 / M_PI, 2) + "° and shifted " + fmt(a.shift_mm, 2) + " mm from the placement asked" +
-                           (alignment.contains("sim_residual_mm") ? "; against the simulated placement off by " +
-                                                                        fmt(alignment["sim_residual_mm"].get<double>(), 3) + " mm, " +
-                                                                        fmt(alignment["sim_residual_deg"].get<double>(), 3) + "°"
-                                                                  : "") +
-                           ")");
+                           truth + ")");
+  return estimated;
+}
 
-  // 3. The setup's first plan: only what is still unmeasured, with the part where the alignment found it.
+/// A further setup's first plan: only what is still unmeasured, with the part where the alignment found it.
+std::optional<JobState> JobRunner::plan_setup(Job& j, int setup, const json& exploration_info, const Eigen::Isometry3d& estimated,
+                                              const json& alignment, const std::atomic<int>& stop) {
+  const std::string name = "setup " + std::to_string(setup);
   const std::vector<std::uint8_t> measured = j.coverage->measured_rows();
   sp::PlannerSettings settings = j.settings;
   if (settings.cover.mode == sp::CoverMode::constrained) settings.cover.mode = sp::CoverMode::greedy;  // views register to the model
@@ -1004,7 +1040,7 @@ std::optional<JobState> JobRunner::start_setup(Job& j, std::int64_t plan, const 
   const json rinfo = {{"round", rounds},
                       {"setup", setup},
                       {"object_on_table", row_major_json(p.cell->object_on_table.matrix())},
-                      {"asked_object_to_table", info.at("asked_object_to_table")},
+                      {"asked_object_to_table", exploration_info.at("asked_object_to_table")},
                       {"alignment", alignment},
                       {"rows", j.rough->size()},
                       {"unmeasurable_rows", unmeasurable},

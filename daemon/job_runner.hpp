@@ -137,6 +137,13 @@ class JobRunner {
   /// down), aligned to the model so far, then the setup's first plan, journalled. An end state if the
   /// alignment is refused or nothing is left to plan.
   std::optional<JobState> start_setup(Job& j, std::int64_t exploration_plan, const std::atomic<int>& stop);
+  /// The exploration samples of a further setup aligned to the model so far (planner::align_setup): the
+  /// placement found (object to table), or nothing when refused; `alignment` gets the figures (and `why`).
+  std::optional<Eigen::Isometry3d> align_to_model(Job& j, const std::string& name, std::int64_t exploration_plan,
+                                                  const Eigen::Isometry3d& asked, const Eigen::Isometry3d& actual,
+                                                  nlohmann::json& alignment);
+  std::optional<JobState> plan_setup(Job& j, int setup, const nlohmann::json& exploration_info, const Eigen::Isometry3d& estimated,
+                                     const nlohmann::json& alignment, const std::atomic<int>& stop);
   /// Executes the views of a plan of axis targets (rough scan, setup exploration) that are not stored yet.
   void explore(Job& j, std::int64_t plan, const planner::CellModel& table_cell, const planner::TriangleMesh& scene, const std::string& what,
                const std::atomic<int>& stop);

@@ -4,7 +4,7 @@
 # model, watches it with scancellctl and prints the result table (views, measured coverage, m_v verified
 # against the ground-truth mesh, time, coverage picture). Usage: scripts/demo.sh BUILD_DIR [rough|flip]
 # With "rough" the job starts from nothing but the object's bounding box: rough scan, fusion into a rough
-# model, plan, execute, register, replan (make demo-rough). With "flip" the job measures the elephant in two
+# model, plan, execute, register, replan (make demo-rough). With "flip" the job measures the fandisk in two
 # setups, turned over by the (simulated) operator in between (make demo-flip).
 set -euo pipefail
 BUILD=${1:-build}
@@ -34,11 +34,13 @@ for _ in $(seq 200); do [ -S "$D/control.sock" ] && break; sleep 0.05; done
 echo "== scancelld: $(head -1 "$D/scancelld.log")"
 set +e
 if [ "$MODE" = flip ]; then
-  # Issue 20: two setups. The elephant stands on its feet, which the plate hides; after setup 1 the job asks
-  # for the part to be turned over (awaiting_operator), the simulated operator puts it down within 8 mm and
-  # 0.2 rad of the pose asked, and setup 2 aligns it to the model and measures the rest.
-  echo "== submit: tests/data/elephant.off, longest side 200 mm, two setups"
-  "$BUILD/tools/scancellctl" --socket "$D/control.sock" submit --mesh tests/data/elephant.off --fit-mm 200 --setups 2 --watch
+  # Issue 20: two setups. The fandisk rests on its large flat base, which the plate hides; after setup 1 the
+  # job asks for the part to be turned over (awaiting_operator), the simulated operator puts it down within
+  # 8 mm and 0.2 rad of the pose asked, and setup 2 aligns it to the model and measures the rest.
+  # FLIP_MESH=tests/data/elephant.off make demo-flip tries another part.
+  FLIP_MESH=${FLIP_MESH:-tests/data/fandisk.off}
+  echo "== submit: $FLIP_MESH, longest side 200 mm, two setups"
+  "$BUILD/tools/scancellctl" --socket "$D/control.sock" submit --mesh "$FLIP_MESH" --fit-mm 200 --setups 2 --watch
   RC=$?
   if [ "$RC" = 15 ]; then
     echo "== the operator turns the part over as asked (the picture: $D/data/jobs/1/next_setup.png), then:"

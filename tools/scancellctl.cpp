@@ -160,6 +160,7 @@ void print_result(const json& reply, double seconds) {
     for (const auto& st : r["setups"]) {
       std::printf("  %-34s %d views", ("setup " + std::to_string(st.value("setup", 0))).c_str(), st.value("views", 0));
       if (st.contains("measured_coverage_before")) std::printf(", from %.4f of the rough model measured", st.value("measured_coverage_before", 0.0));
+      if (st.contains("verified_mv_at_end")) std::printf(", verified m_v %.4f at its end (ground truth)", st.value("verified_mv_at_end", 0.0));
       if (st.contains("resting_pose")) std::printf(", resting pose %d", st.value("resting_pose", 0));
       if (st.contains("alignment")) {
         const json& a = st["alignment"];

@@ -797,6 +797,9 @@ TEST_F(SimCell, TwoSetupsTurnThePartOverAlignItAndMeasureWhatRestedOnThePlate) {
   // What setup 2 measured is where it is: the views registered and the ground truth agrees.
   EXPECT_GT(result["measured_coverage"].get<double>(), after_setup1 + 0.02);
   EXPECT_GT(result["verified_mv"].get<double>(), 0.95);
+  // And against the truth: setup 1 ended lower, by what rested on the plate.
+  ASSERT_TRUE(result["setups"][0].contains("verified_mv_at_end")) << result["setups"].dump();
+  EXPECT_LT(result["setups"][0]["verified_mv_at_end"].get<double>(), result["verified_mv"].get<double>() - 0.02);
 }
 
 TEST(JobRequest, BadInputIsRefusedNamingTheFile) {
