@@ -164,6 +164,11 @@ PlannerSettings load_planner_settings(const std::filesystem::path& file) {
     vs.min_position_spacing_fraction = v.get_or<double>("min_position_spacing_fraction", vs.min_position_spacing_fraction);
     if (!(vs.min_position_spacing_fraction >= 0.0 && vs.min_position_spacing_fraction <= 1.0))
       v.fail(v.key_path("min_position_spacing_fraction"), "must be in [0, 1], got " + std::to_string(vs.min_position_spacing_fraction));
+    vs.free_space_min_position_spacing_fraction =
+        v.get_or<double>("free_space_min_position_spacing_fraction", vs.free_space_min_position_spacing_fraction);
+    if (!(vs.free_space_min_position_spacing_fraction >= 0.0 && vs.free_space_min_position_spacing_fraction <= 1.0))
+      v.fail(v.key_path("free_space_min_position_spacing_fraction"),
+             "must be in [0, 1], got " + std::to_string(vs.free_space_min_position_spacing_fraction));
     vs.twist_levels = v.get_or<int>("twist_levels", vs.twist_levels);
     if (vs.twist_levels < 1 || vs.twist_levels > 360) v.fail(v.key_path("twist_levels"), "must be in [1, 360]");
     vs.standoff_adjust_max_mm = v.non_negative("standoff_adjust_max_mm", vs.standoff_adjust_max_mm);

@@ -103,6 +103,19 @@ Countermeasures with_free_space_margin(Countermeasures cm, const Countermeasures
   return cm;
 }
 
+/// The free-space margin (config.hpp) against the rough model's own error, unless the rows are the object's
+/// own dense mesh: a mesh taken as given (not decimated) whose rows lie closer together than twice the
+/// visibility margin already probes, with its neighbours' own rays, the ±margin around each row that the
+/// margin's displaced rays would, and its normals are the object's. Measured (docs/quality.md): the bunny as
+/// given (37.7k rows, 1.3 mm apart) plans 45 views at verified m_v 1.000 without it against 57 with it, in a
+/// third of the time; knot1 as given (3.2k rows, 5.5 mm apart) needs it (0.982 without).
+void apply_free_space_margin(ViewPlan& p, PlannerSettings& settings) {
+  const Countermeasures& f = settings.free_space_countermeasures;
+  const double spacing_mm = p.rough.size() ? std::sqrt(p.rough.total_area_mm2 / static_cast<double>(p.rough.size())) : 0.0;
+  p.free_space_margin_applied = p.rough_report.decimated || spacing_mm > 2.0 * f.visibility_margin_mm;
+  if (p.free_space_margin_applied) settings.matrix.countermeasures = with_free_space_margin(settings.matrix.countermeasures, f);
+}
+
 /// The cover's row weights: the rows' areas, zero for rows already measured (the cover goes after the rest),
 /// scaled by the closed loop's factors.
 std::vector<double> row_weights(const RoughModel& rough, const std::vector<std::uint8_t>* measured_rows,
@@ -194,7 +207,9 @@ void merge_duplicates(ViewPlan& p, std::vector<Viewpoint>& cands) {
 /// with a cell either its own space (cell_viewpoints.hpp) or the free ones projected onto it.
 std::vector<Viewpoint> make_candidates(const Stage& s, const OcclusionScene& scene) {
   ViewPlan& p = s.p;
-  auto candidates = generate_viewpoints(p.rough, scene, s.sensor, s.spec, s.settings.viewpoints, &p.generation);
+  ViewpointSettings vs = s.settings.viewpoints;
+  if (!p.cell) vs.min_position_spacing_fraction = vs.free_space_min_position_spacing_fraction;
+  auto candidates = generate_viewpoints(p.rough, scene, s.sensor, s.spec, vs, &p.generation);
   const std::size_t n_zone = candidates.size();  // the optimal-zone candidates (single-best views follow)
   // Thesis 6.3.4: with a segmented rough model, each segment also gets its single-best-view candidates
   // (twist in 90° steps); the cover takes them when one view can do a whole patch.
@@ -386,9 +401,6 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
   // needs it least: bunny, 37.7k rows, 58 views with it and 45 without, both verified m_v 1.0000. But coarse
   // meshes given as they are need it as much as decimated ones: knot1's 3.2k rows, 0.982 without; so it is
   // not switched on decimation. docs/quality.md.)
-  p.free_space_margin_applied = !cell_in && settings.free_space_countermeasures.any();
-  if (p.free_space_margin_applied)
-    settings.matrix.countermeasures = with_free_space_margin(settings.matrix.countermeasures, settings.free_space_countermeasures);
   if (cell_in) {
     // The object rests on the plate in the cell's configured orientation (object_rpy_rad, or the resting pose
     // a placement choice put there): its rotated bounding box centred on the turntable axis, its lowest point
@@ -409,6 +421,10 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     p.rough = build_rough_model(std::move(object_mm), rough_options, &p.rough_report);
     p.times.rough_model_s = seconds_since(t);
     check("the rough model");
+    if (!cell_in && settings.free_space_countermeasures.any()) {
+      apply_free_space_margin(p, settings);
+      p.settings.matrix.countermeasures = settings.matrix.countermeasures;
+    }
     const std::vector<double> row_weight = row_weights(p.rough, measured_rows, row_weight_scale);
 
     t = Clock::now();
@@ -475,6 +491,7 @@ json settings_json(const ViewPlan& p) {
                 {"standoff_factor", vs.standoff_factor},
                 {"position_decimation", vs.position_decimation},
                 {"min_position_spacing_fraction", vs.min_position_spacing_fraction},
+                {"free_space_min_position_spacing_fraction", vs.free_space_min_position_spacing_fraction},
                 {"twist_levels", vs.twist_levels},
                 {"standoff_adjust_max_mm", vs.standoff_adjust_max_mm},
                 {"scan_length_design_incidence_rad", vs.scan_length_design_incidence_rad},

@@ -46,7 +46,9 @@ struct ViewPlan {
   RoughModelReport rough_report;
   RoughModel rough;
   GenerationReport generation;
-  bool free_space_margin_applied = false;  // matrix.free_space_countermeasures merged in (no cell, derived rough model)
+  /// matrix.free_space_countermeasures merged in: no cell, and a decimated rough model or rows farther apart than
+  /// twice the visibility margin (apply_free_space_margin in plan.cpp)
+  bool free_space_margin_applied = false;
   MatrixStats matrix_stats;
   std::size_t candidates = 0;
   std::size_t segments = 0;  // labelled surface patches of the rough model

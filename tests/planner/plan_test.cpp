@@ -125,6 +125,20 @@ TEST(Plan, TheFreeSpaceMarginTightensTheMatrixWithoutACellOnly) {
     EXPECT_NEAR(tb.cover.measurable_fraction, ta.cover.measurable_fraction, 0.002);
     EXPECT_EQ(a.generation.rows_without_margin, 0u);
   }
+  // A mesh taken as given whose rows lie closer than twice the visibility margin (2 mm) is its own dense
+  // sample: no margin. The same patch with rows 4 mm apart, or decimated, gets it.
+  {
+    const RoughModelOptions as_given;
+    const ViewPlan dense = plan_views(testing::flat_patch(40, 1.0), testing::thesis_sensor(), testing::thesis_spec(), margin, as_given, 2);
+    const ViewPlan sparse = plan_views(testing::flat_patch(40, 4.0), testing::thesis_sensor(), testing::thesis_spec(), margin, as_given, 2);
+    RoughModelOptions decimated;
+    decimated.target_vertices = 400;
+    const ViewPlan coarse = plan_views(testing::flat_patch(40, 1.0), testing::thesis_sensor(), testing::thesis_spec(), margin, decimated, 2);
+    EXPECT_FALSE(dense.free_space_margin_applied);
+    EXPECT_DOUBLE_EQ(dense.settings.matrix.countermeasures.visibility_margin_mm, 0.0);
+    EXPECT_TRUE(sparse.free_space_margin_applied);
+    EXPECT_TRUE(coarse.free_space_margin_applied);
+  }
   // On a cell the margin is not applied: the same plan as without it.
   const CellModel cell = load_cell(testing::source_path("config/cells/turntable-lift-tilt.yaml"));
   const ViewPlan c = plan_views(m, testing::thesis_sensor(), testing::thesis_spec(), none, o, 2, &cell);
