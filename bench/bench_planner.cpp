@@ -143,9 +143,12 @@ void run_as_given(const sp::TriangleMesh& mesh_mm, int threads) {
               "views", "est_m", "reach", "matrix_s", "cover_s", "total_s");
   for (const sp::CellModel* c : {static_cast<const sp::CellModel*>(nullptr), &cell}) {
     double reference_s = 0.0;
-    for (const double fraction : {0.0, shipped.viewpoints.min_position_spacing_fraction}) {
+    const double shipped_fraction =
+        c ? shipped.viewpoints.min_position_spacing_fraction : shipped.viewpoints.free_space_min_position_spacing_fraction;
+    for (const double fraction : {0.0, shipped_fraction}) {
       sp::PlannerSettings st = shipped;
       st.viewpoints.min_position_spacing_fraction = fraction;
+      st.viewpoints.free_space_min_position_spacing_fraction = fraction;
       const sp::ViewPlan p = sp::plan_views(mesh_mm, sensor, spec, st, {}, threads, c);
       const double total = p.times.rough_model_s + p.times.scene_s + p.times.viewpoints_s + p.times.matrix_s + p.times.cover_s;
       if (fraction == 0.0) reference_s = total;
@@ -155,6 +158,7 @@ void run_as_given(const sp::TriangleMesh& mesh_mm, int threads) {
                   p.generation.positions, p.candidates, p.views.size(),
                   p.cover.cumulative_fraction.empty() ? 0.0 : p.cover.cumulative_fraction.back(), p.cover.measurable_fraction,
                   p.times.matrix_s, p.times.cover_s, total);
+      if (!c) std::printf("  margin %s", p.free_space_margin_applied ? "on" : "off");
       if (fraction != 0.0) std::printf("   (%.2fx the d_v-alone time; target <= 10 s)", total / reference_s);
       std::printf("\n");
     }
