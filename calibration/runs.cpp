@@ -110,33 +110,33 @@ sp::JointVector look_at(const sp::CellModel& cell, const Eigen::Vector3d& p, dou
 }
 
 // ---------------------------------------------------------------------------------------------------------
-// Sensor: C_z from a plate across the range, t_xz from the plate at grazing tilts, t_yz from a ramp turned on
-// the turntable (θ_yz of a line scan is set by the surface alone, so the ramp's slope seen along the camera's
-// y is what varies it).
+// Sensor runs.
 
-SensorResult run_sensor(const RunContext& ctx, const SensorRunOptions& o) {
+namespace {
+
+/// A plane scan kept for the noise fits: its view-frame samples and fitted plane.
+struct PlaneScan {
+  std::vector<Eigen::Vector3d> pts;
+  Eigen::Vector3d n, p0;
+};
+
+const Eigen::Vector3d kPlateCentre(0.0, 0.0, kPlateThicknessMm);
+
+bool on_plate(const Eigen::Vector3d& t) {
+  return std::abs(t.x()) < 0.5 * kPlateSideMm - 3.0 && std::abs(t.y()) < 0.5 * kPlateSideMm - 3.0 && std::abs(t.z() - kPlateThicknessMm) < 1.0;
+}
+
+/// 1. Depth noise against range: the plate face-on at `o.standoffs` stand-offs across the range; each scan's
+/// residuals normal to its fitted plane give σz at that depth (fit_noise below).
+std::vector<PlaneScan> scan_noise_plates(const RunContext& ctx, const SensorRunOptions& o, SensorResult& r) {
   const sp::SensorModel& s = ctx.sensor;
-  SensorResult r;
-  const double plate_side = kPlateSideMm, plate_t = kPlateThicknessMm;
-  const Eigen::Vector3d plate_centre(0.0, 0.0, plate_t);
-  auto on_plate = [&](const Eigen::Vector3d& t) {
-    return std::abs(t.x()) < 0.5 * plate_side - 3.0 && std::abs(t.y()) < 0.5 * plate_side - 3.0 && std::abs(t.z() - plate_t) < 1.0;
-  };
-
-  // 1. Depth noise against range: the residuals of each plate scan normal to its fitted plane, with the
-  //    (model) lateral noise's share removed, give σz at that depth; σz = C_z z² by least squares.
-  // A plane scan kept for the fits: its view-frame samples and fitted plane.
-  struct PlaneScan {
-    std::vector<Eigen::Vector3d> pts;
-    Eigen::Vector3d n, p0;
-  };
-  std::vector<PlaneScan> noise_scans, oblique_scans;
+  std::vector<PlaneScan> scans;
   for (int k = 0; k < o.standoffs; ++k) {
     const double span = s.range_max_mm - s.range_min_mm;
     const double standoff = s.range_min_mm + span * (0.1 + 0.75 * k / std::max(1, o.standoffs - 1));
     const std::string what = "noise scan " + std::to_string(k + 1) + " at stand-off " + std::to_string(static_cast<int>(standoff)) + " mm";
     // The table turned half a turn: the ramp stands on the far side, out of the plate's rays.
-    const sp::JointVector q = look_at(ctx.cell, plate_centre - Eigen::Vector3d(o.plate_aim_x_mm, 0, 0), standoff, o.plate_tilt_rad,
+    const sp::JointVector q = look_at(ctx.cell, kPlateCentre - Eigen::Vector3d(o.plate_aim_x_mm, 0, 0), standoff, o.plate_tilt_rad,
                                       std::numbers::pi, o.scan_length_mm, what);
     const sp::RangeImage img = ctx.scan(q, o.scan_length_mm);
     ++r.scans;
@@ -145,23 +145,57 @@ SensorResult run_sensor(const RunContext& ctx, const SensorRunOptions& o) {
       throw DataError(what + ": " + std::to_string(pts.size()) + " samples on the plate (at least 1000 needed; is the plate on the table?)");
     PlaneFit f = fit_plane(pts, what);
     f.normal = oriented(f.normal, -f.point);
-    noise_scans.push_back({pts, f.normal, f.point});
+    scans.push_back({pts, f.normal, f.point});
   }
-  // Lateral noise (eq. 3.3): on a plane whose normal n leans in the camera's x or y, the residuals normal to
-  // it carry n_x σx and n_y σy beside n_z σz: r² ≈ (n_x z)² C_x² + (n_y z)² C_y² + (n_z σz)², σz known now,
-  // linear in (C_x², C_y²). The grazing plate scans lean in x, the ramp scans in y.
-  auto lateral = [&](const std::vector<Eigen::Vector3d>& pts, const Eigen::Vector3d& n, const Eigen::Vector3d& p0) {
-    oblique_scans.push_back({pts, n, p0});
-  };
+  return scans;
+}
 
-  // 2. t_xz: the plate seen ever more obliquely; within a scan θ_xz sweeps across the fan, so the threshold
-  //    is the edge between rays that return and rays that do not.
+/// The edge between rays that return and rays that do not, from the rays' incidence θ_xz; where noise makes
+/// the two overlap, the threshold that misclassifies the fewest rays.
+Estimate grazing_threshold(const std::vector<RayOutcome>& xz, double expected_rad) {
+  double returned_max = -1.0, missing_min = 10.0;
+  std::size_t returned = 0, missing = 0;
+  for (const auto& x : xz) {
+    if (x.returned) {
+      returned_max = std::max(returned_max, x.theta_xz);
+      ++returned;
+    } else {
+      missing_min = std::min(missing_min, x.theta_xz);
+      ++missing;
+    }
+  }
+  if (returned < 100 || missing < 100)
+    throw DataError("t_xz: the grazing scans do not straddle the threshold (" + std::to_string(returned) + " rays returned, " +
+                    std::to_string(missing) + " missing; expected around " + deg(expected_rad) + ")");
+  if (missing_min < returned_max) {
+    std::vector<RayOutcome> sorted = xz;
+    std::sort(sorted.begin(), sorted.end(), [](const RayOutcome& x, const RayOutcome& y) { return x.theta_xz < y.theta_xz; });
+    long wrong = static_cast<long>(returned), best_wrong = wrong;  // threshold below every ray: all returned are wrong
+    std::size_t best = 0;
+    for (std::size_t i = 0; i + 1 < sorted.size(); ++i) {
+      wrong += sorted[i].returned ? -1 : 1;
+      if (wrong < best_wrong) {
+        best_wrong = wrong;
+        best = i;
+      }
+    }
+    returned_max = sorted[best].theta_xz;
+    missing_min = sorted[best + 1].theta_xz;
+  }
+  return {0.5 * (returned_max + missing_min), std::max(0.5 * (missing_min - returned_max), 1e-4)};
+}
+
+/// 2. t_xz: the plate seen ever more obliquely; within a scan θ_xz sweeps across the fan, so the threshold is
+/// the edge between rays that return and rays that do not. The scans with enough plate samples also lean the
+/// plane in the camera's x: kept in `oblique` for the lateral noise.
+Estimate measure_t_xz(const RunContext& ctx, const SensorRunOptions& o, SensorResult& r, std::vector<PlaneScan>& oblique) {
+  const sp::SensorModel& s = ctx.sensor;
   std::vector<RayOutcome> xz;
   for (int k = 0; k < o.t_xz_tilts; ++k) {
     const double boresight = s.grazing_xz_rad + 0.2 * (k - 0.5 * (o.t_xz_tilts - 1));  // from the plate normal
     const double tilt = 0.5 * std::numbers::pi - boresight;
     const std::string what = "grazing scan " + std::to_string(k + 1) + " (boresight " + deg(boresight) + " from the plate normal)";
-    const sp::JointVector q = look_at(ctx.cell, plate_centre, 0.5 * (s.range_min_mm + s.range_max_mm) * 0.8, tilt,
+    const sp::JointVector q = look_at(ctx.cell, kPlateCentre, 0.5 * (s.range_min_mm + s.range_max_mm) * 0.8, tilt,
                                       std::numbers::pi, o.scan_length_mm, what);
     const sp::RangeImage img = ctx.scan(q, o.scan_length_mm);
     ++r.scans;
@@ -172,52 +206,25 @@ SensorResult run_sensor(const RunContext& ctx, const SensorRunOptions& o) {
       const PlaneFit f = fit_plane(pts, what);
       n = oriented(f.normal, -f.point);
       p = f.point;
-      lateral(pts, n, p);
+      oblique.push_back({pts, n, p});
     } else {
       const Eigen::Isometry3d to_view = img.pose.camera_to_object.inverse();
       n = to_view.linear() * Eigen::Vector3d::UnitZ();
-      p = to_view * plate_centre;
+      p = to_view * kPlateCentre;
     }
     const auto rays = rays_on_plane(img, s, n, p, on_plate);
     xz.insert(xz.end(), rays.begin(), rays.end());
   }
-  {
-    double returned_max = -1.0, missing_min = 10.0;
-    std::size_t returned = 0, missing = 0;
-    for (const auto& x : xz) {
-      if (x.returned) {
-        returned_max = std::max(returned_max, x.theta_xz);
-        ++returned;
-      } else {
-        missing_min = std::min(missing_min, x.theta_xz);
-        ++missing;
-      }
-    }
-    if (returned < 100 || missing < 100)
-      throw DataError("t_xz: the grazing scans do not straddle the threshold (" + std::to_string(returned) + " rays returned, " +
-                      std::to_string(missing) + " missing; expected around " + deg(s.grazing_xz_rad) + ")");
-    if (missing_min < returned_max) {
-      // Overlap (noise at the edge): the threshold that misclassifies the fewest rays.
-      std::vector<RayOutcome> sorted = xz;
-      std::sort(sorted.begin(), sorted.end(), [](const RayOutcome& x, const RayOutcome& y) { return x.theta_xz < y.theta_xz; });
-      long wrong = static_cast<long>(returned), best_wrong = wrong;  // threshold below every ray: all returned are wrong
-      std::size_t best = 0;
-      for (std::size_t i = 0; i + 1 < sorted.size(); ++i) {
-        wrong += sorted[i].returned ? -1 : 1;
-        if (wrong < best_wrong) {
-          best_wrong = wrong;
-          best = i;
-        }
-      }
-      returned_max = sorted[best].theta_xz;
-      missing_min = sorted[best + 1].theta_xz;
-    }
-    r.t_xz_rad = {0.5 * (returned_max + missing_min), std::max(0.5 * (missing_min - returned_max), 1e-4)};
-    ctx.log("t_xz " + deg(r.t_xz_rad.value) + " ± " + deg(r.t_xz_rad.ci95) + " from " + std::to_string(xz.size()) + " rays");
-  }
+  const Estimate t = grazing_threshold(xz, s.grazing_xz_rad);
+  ctx.log("t_xz " + deg(t.value) + " ± " + deg(t.ci95) + " from " + std::to_string(xz.size()) + " rays");
+  return t;
+}
 
-  // 3. t_yz: the ramp turned on the table; each scan's yield (rays with θ_xz safely below t_xz that return),
-  //    then bisection on the table angle where the yield falls through the threshold.
+/// 3. t_yz: the ramp turned on the table; each scan's yield (rays with θ_xz safely below t_xz that return),
+/// then bisection on the table angle where the yield falls through the threshold. The ramp scans lean the
+/// plane in the camera's y: kept in `oblique`.
+Estimate measure_t_yz(const RunContext& ctx, const SensorRunOptions& o, SensorResult& r, std::vector<PlaneScan>& oblique) {
+  const sp::SensorModel& s = ctx.sensor;
   const Ramp ramp = o.ramp;
   auto on_face = [&](const Eigen::Vector3d& t) { return on_ramp_face(ramp, t, 3.0, 1.0); };
   const double standoff = s.range_min_mm + 0.3 * (s.range_max_mm - s.range_min_mm);
@@ -233,7 +240,7 @@ SensorResult run_sensor(const RunContext& ctx, const SensorRunOptions& o) {
       const PlaneFit f = fit_plane(pts, what);
       n = oriented(f.normal, n);
       p = f.point;
-      lateral(pts, n, p);
+      oblique.push_back({pts, n, p});
     }
     std::size_t eligible = 0, returned = 0;
     for (const auto& x : rays_on_plane(img, s, n, p, on_face))
@@ -280,63 +287,87 @@ SensorResult run_sensor(const RunContext& ctx, const SensorRunOptions& o) {
       th_lo = th;
     }
   }
-  r.t_yz_rad = {0.5 * (th_lo + th_hi), std::max(0.5 * std::abs(th_lo - th_hi), 1e-4)};
-  ctx.log("t_yz " + deg(r.t_yz_rad.value) + " ± " + deg(r.t_yz_rad.ci95));
+  const Estimate t{0.5 * (th_lo + th_hi), std::max(0.5 * std::abs(th_lo - th_hi), 1e-4)};
+  ctx.log("t_yz " + deg(t.value) + " ± " + deg(t.ci95));
+  return t;
+}
+
+/// σz per stand-off from the face-on scans: the residuals normal to the plane with the lateral noise's share
+/// (C_x, C_y given) removed; C_z from σz = C_z z² by least squares.
+void fit_depth_noise(const std::vector<PlaneScan>& noise_scans, double cx, double cy, SensorResult& r) {
+  std::vector<double> z2, sig;
+  r.noise.clear();
+  for (const auto& sc : noise_scans) {
+    double acc = 0.0;
+    std::vector<double> depths;
+    for (const auto& p : sc.pts) {
+      const double z = -p.z(), res = (p - sc.p0).dot(sc.n);
+      depths.push_back(z);
+      const double lateral_share = std::pow(sc.n.x() * cx * z, 2) + std::pow(sc.n.y() * cy * z, 2);
+      acc += (res * res - lateral_share) / (sc.n.z() * sc.n.z() * z * z * z * z);
+    }
+    std::nth_element(depths.begin(), depths.begin() + static_cast<long>(depths.size() / 2), depths.end());
+    const double zm = depths[depths.size() / 2], c2 = acc / static_cast<double>(sc.pts.size() - 3);
+    if (!(c2 > 0.0)) throw DataError("noise scans: no depth noise left after the lateral share (plate not flat?)");
+    r.noise.push_back({zm, std::sqrt(c2) * zm * zm, sc.pts.size()});
+    z2.push_back(zm * zm);
+    sig.push_back(r.noise.back().sigma_z_mm);
+  }
+  const ProportionalFit cz = fit_proportional(z2, sig, "C_z fit");
+  r.cz_per_mm = {cz.k, std::max(cz.ci95(), 1.96 * cz.k / std::sqrt(2.0 * static_cast<double>(r.noise.front().samples)))};
+  r.noise_fit_rms_mm = cz.rms;
+}
+
+/// Lateral noise (eq. 3.3): on a plane whose normal n leans in the camera's x or y, the residuals normal to it
+/// carry n_x σx and n_y σy beside n_z σz: r² ≈ (n_x z)² C_x² + (n_y z)² C_y² + (n_z σz)², linear in (C_x², C_y²)
+/// with σz from C_z. The grazing plate scans lean in x, the ramp scans in y.
+void fit_lateral_noise(const std::vector<PlaneScan>& oblique_scans, SensorResult& r) {
+  Eigen::Matrix2d ata = Eigen::Matrix2d::Zero();
+  Eigen::Vector2d atb = Eigen::Vector2d::Zero();
+  double cc = 0.0;
+  std::size_t n = 0;
+  for (const auto& sc : oblique_scans) {
+    const double cos_yz = sc.n.z() / std::hypot(sc.n.y(), sc.n.z());
+    for (const auto& q : sc.pts) {
+      const double z = -q.z(), res = (q - sc.p0).dot(sc.n), sz = r.cz_per_mm.value * z * z / cos_yz;
+      const Eigen::Vector2d a(std::pow(sc.n.x() * z, 2), std::pow(sc.n.y() * z, 2));
+      const double c = res * res - std::pow(sc.n.z() * sz, 2);
+      ata += a * a.transpose();
+      atb += a * c;
+      cc += c * c;
+      ++n;
+    }
+  }
+  if (n < 1000 || std::abs(ata.determinant()) < 1e-12 * ata.squaredNorm())
+    throw DataError("C_x, C_y: too few oblique samples to separate the lateral noise");
+  const Eigen::Vector2d c2 = ata.ldlt().solve(atb);
+  const double ss = std::max(0.0, cc - 2.0 * c2.dot(atb) + c2.dot(ata * c2));
+  const Eigen::Matrix2d cov = ss / static_cast<double>(n - 2) * ata.inverse();
+  auto root = [&](int k) {
+    const double v = std::max(c2(k), 0.0), se2 = std::sqrt(std::max(cov(k, k), 0.0)), value = std::sqrt(v);
+    return Estimate{value, value > 0.0 ? 1.96 * se2 / (2.0 * value) : 1.96 * std::sqrt(se2)};
+  };
+  r.cx = root(0);
+  r.cy = root(1);
+}
+
+}  // namespace
+
+// Sensor: C_z from a plate across the range, t_xz from the plate at grazing tilts, t_yz from a ramp turned on
+// the turntable (θ_yz of a line scan is set by the surface alone, so the ramp's slope seen along the camera's
+// y is what varies it).
+SensorResult run_sensor(const RunContext& ctx, const SensorRunOptions& o) {
+  SensorResult r;
+  std::vector<PlaneScan> oblique;
+  const std::vector<PlaneScan> noise = scan_noise_plates(ctx, o, r);
+  r.t_xz_rad = measure_t_xz(ctx, o, r, oblique);
+  r.t_yz_rad = measure_t_yz(ctx, o, r, oblique);
   // σz per stand-off (C_z) and the lateral coefficients (C_x, C_y) each need the other to remove its share
   // of the residuals: alternate, starting from the model's C_x, C_y.
-  double cx = s.noise_cx, cy = s.noise_cy;
+  double cx = ctx.sensor.noise_cx, cy = ctx.sensor.noise_cy;
   for (int pass = 0; pass < 4; ++pass) {
-    std::vector<double> z2, sig;
-    r.noise.clear();
-    for (const auto& sc : noise_scans) {
-      double acc = 0.0;
-      std::vector<double> depths;
-      for (const auto& p : sc.pts) {
-        const double z = -p.z(), res = (p - sc.p0).dot(sc.n);
-        depths.push_back(z);
-        const double lateral_share = std::pow(sc.n.x() * cx * z, 2) + std::pow(sc.n.y() * cy * z, 2);
-        acc += (res * res - lateral_share) / (sc.n.z() * sc.n.z() * z * z * z * z);
-      }
-      std::nth_element(depths.begin(), depths.begin() + static_cast<long>(depths.size() / 2), depths.end());
-      const double zm = depths[depths.size() / 2], c2 = acc / static_cast<double>(sc.pts.size() - 3);
-      if (!(c2 > 0.0)) throw DataError("noise scans: no depth noise left after the lateral share (plate not flat?)");
-      r.noise.push_back({zm, std::sqrt(c2) * zm * zm, sc.pts.size()});
-      z2.push_back(zm * zm);
-      sig.push_back(r.noise.back().sigma_z_mm);
-    }
-    const ProportionalFit cz = fit_proportional(z2, sig, "C_z fit");
-    r.cz_per_mm = {cz.k, std::max(cz.ci95(), 1.96 * cz.k / std::sqrt(2.0 * static_cast<double>(r.noise.front().samples)))};
-    r.noise_fit_rms_mm = cz.rms;
-    // Lateral noise (eq. 3.3): on a plane whose normal n leans in the camera's x or y, the residuals normal
-    // to it carry n_x σx and n_y σy beside n_z σz: r² ≈ (n_x z)² C_x² + (n_y z)² C_y² + (n_z σz)², linear in
-    // (C_x², C_y²). The grazing plate scans lean in x, the ramp scans in y.
-    Eigen::Matrix2d ata = Eigen::Matrix2d::Zero();
-    Eigen::Vector2d atb = Eigen::Vector2d::Zero();
-    double cc = 0.0;
-    std::size_t n = 0;
-    for (const auto& sc : oblique_scans) {
-      const double cos_yz = sc.n.z() / std::hypot(sc.n.y(), sc.n.z());
-      for (const auto& q : sc.pts) {
-        const double z = -q.z(), res = (q - sc.p0).dot(sc.n), sz = r.cz_per_mm.value * z * z / cos_yz;
-        const Eigen::Vector2d a(std::pow(sc.n.x() * z, 2), std::pow(sc.n.y() * z, 2));
-        const double c = res * res - std::pow(sc.n.z() * sz, 2);
-        ata += a * a.transpose();
-        atb += a * c;
-        cc += c * c;
-        ++n;
-      }
-    }
-    if (n < 1000 || std::abs(ata.determinant()) < 1e-12 * ata.squaredNorm())
-      throw DataError("C_x, C_y: too few oblique samples to separate the lateral noise");
-    const Eigen::Vector2d c2 = ata.ldlt().solve(atb);
-    const double ss = std::max(0.0, cc - 2.0 * c2.dot(atb) + c2.dot(ata * c2));
-    const Eigen::Matrix2d cov = ss / static_cast<double>(n - 2) * ata.inverse();
-    auto root = [&](int k) {
-      const double v = std::max(c2(k), 0.0), se2 = std::sqrt(std::max(cov(k, k), 0.0)), value = std::sqrt(v);
-      return Estimate{value, value > 0.0 ? 1.96 * se2 / (2.0 * value) : 1.96 * std::sqrt(se2)};
-    };
-    r.cx = root(0);
-    r.cy = root(1);
+    fit_depth_noise(noise, cx, cy, r);
+    fit_lateral_noise(oblique, r);
     cx = r.cx.value;
     cy = r.cy.value;
   }
