@@ -1,5 +1,6 @@
 #include "daemon/daemon_config.hpp"
 
+#include <cmath>
 #include <fstream>
 #include <sstream>
 
@@ -18,24 +19,20 @@ fs::path relative_to(const fs::path& base, const std::string& p) {
   return q.is_absolute() ? q : fs::absolute(base.parent_path() / q).lexically_normal();
 }
 
+/// A file named by `key`, relative to the config file; refused naming the key when it does not exist.
+fs::path existing_file(const DaemonConfig& c, scancell::Section& s, const std::string& key) {
+  const fs::path p = relative_to(c.file, s.get<std::string>(key));
+  if (!fs::exists(p)) s.fail(s.key_path(key), "no such file '" + p.string() + "'");
+  return p;
+}
 
-}  // namespace
-
-DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_dir, const std::string& socket) {
-  DaemonConfig c;
-  c.file = fs::absolute(file);
-  YAML::Node holder;
-  scancell::Section y = scancell::open_root(c.file, holder);
-  auto path_key = [&](scancell::Section& s, const std::string& key) {
-    const fs::path p = relative_to(c.file, s.get<std::string>(key));
-    if (!fs::exists(p)) s.fail(s.key_path(key), "no such file '" + p.string() + "'");
-    return p;
-  };
-  c.cell_file = path_key(y, "cell");
-  c.drivers_file = path_key(y, "drivers");
-  c.sensor_file = path_key(y, "sensor");
-  c.spec_file = path_key(y, "spec");
-  c.planner_file = path_key(y, "planner");
+/// The model files, calibration files, data directory and LCM URL at the top level.
+void read_files(DaemonConfig& c, scancell::Section& y, const std::string& data_dir) {
+  c.cell_file = existing_file(c, y, "cell");
+  c.drivers_file = existing_file(c, y, "drivers");
+  c.sensor_file = existing_file(c, y, "sensor");
+  c.spec_file = existing_file(c, y, "spec");
+  c.planner_file = existing_file(c, y, "planner");
   if (y.has("calibration")) {
     const YAML::Node n = y.raw("calibration");
     if (!n.IsSequence()) y.fail("calibration", "must be a list of files");
@@ -50,154 +47,163 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
   c.lcm_url = y.get_or<std::string>("lcm_url", std::string("udpm://239.255.76.67:7667?ttl=0"));
   if (c.lcm_url.rfind("udpm://", 0) != 0 && c.lcm_url.rfind("memq://", 0) != 0 && c.lcm_url.rfind("file://", 0) != 0)
     y.fail("lcm_url", "must be a udpm://, memq:// or file:// LCM URL, got '" + c.lcm_url + "'");
-  {
-    scancell::Section s = y.section("control");
-    const std::string socket_key = s.get<std::string>("socket");
-    c.socket_path = socket.empty() ? relative_to(c.file, socket_key) : fs::absolute(socket);
-    c.control.group = s.get_or<std::string>("group", "");
-    c.control.max_clients = s.ranged<int>("max_clients", c.control.max_clients, 1, 1000);
-    c.control.idle_timeout_s = s.ranged<double>("idle_timeout_s", c.control.idle_timeout_s, 0.1, 86400.0);
-    c.control.send_timeout_s = s.ranged<double>("send_timeout_s", c.control.send_timeout_s, 0.1, 600.0);
-    s.finish();
+}
+
+void read_control(DaemonConfig& c, scancell::Section s, const std::string& socket) {
+  const std::string socket_key = s.get<std::string>("socket");
+  c.socket_path = socket.empty() ? relative_to(c.file, socket_key) : fs::absolute(socket);
+  c.control.group = s.get_or<std::string>("group", "");
+  c.control.max_clients = s.ranged<int>("max_clients", c.control.max_clients, 1, 1000);
+  c.control.idle_timeout_s = s.ranged<double>("idle_timeout_s", c.control.idle_timeout_s, 0.1, 86400.0);
+  c.control.send_timeout_s = s.ranged<double>("send_timeout_s", c.control.send_timeout_s, 0.1, 600.0);
+  s.finish();
+}
+
+/// The GenICam driver's settings, each declared once with its range (drivers/genicam/genicam_scanner.hpp).
+void read_genicam(DaemonConfig& c, scancell::Section& s) {
+  auto& g = c.genicam;
+  g.device = s.get_or<std::string>("device", c.scanner_driver == "sim_gige" ? "127.0.0.1" : "");
+  using G = drivers::GenicamConfig;
+  auto ranged = [&](const char* key, auto fallback, auto lim) { return s.ranged<decltype(fallback)>(key, fallback, lim.lo, lim.hi); };
+  g.profiles_per_frame = ranged("profiles_per_frame", g.profiles_per_frame, G::profiles_per_frame_limits);
+  g.trigger_line = s.get_or<std::string>("trigger_line", g.trigger_line);
+  g.packet_size_bytes = s.ranged<int>("packet_size_bytes", g.packet_size_bytes, 0, G::packet_size_bytes_limits.hi);  // 0: the device's
+  g.mark_columns = s.ranged<int>("mark_columns", g.mark_columns, 0, 2);
+  g.mono16_scale_mm = ranged("mono16_scale_mm", g.mono16_scale_mm, G::mono16_scale_mm_limits);
+  g.mono16_offset_mm = ranged("mono16_offset_mm", g.mono16_offset_mm, G::mono16_offset_mm_limits);
+  g.exposure_us = ranged("exposure_us", g.exposure_us, G::exposure_us_limits);
+  g.stream_buffers = ranged("stream_buffers", g.stream_buffers, G::stream_buffers_limits);
+  try {
+    drivers::check_genicam_config(g, "scanner");
+  } catch (const drivers::DriverError& e) {
+    s.fail(e.where, e.cause);  // e.where is the key path (scanner.device, ...)
   }
-  {
-    scancell::Section s = y.section("scanner");
-    c.scanner_driver = s.get<std::string>("driver");
-    if (c.scanner_driver != "sim" && c.scanner_driver != "sim_gige" && c.scanner_driver != "genicam")
-      s.fail(s.key_path("driver"), "must be sim, sim_gige or genicam, got '" + c.scanner_driver + "'");
-    c.scanner_seed = s.get_or<std::uint64_t>("seed", 1);
-    if (c.scanner_driver != "sim") {
-      // The GenICam driver's settings, each declared once with its range (drivers/genicam/genicam_scanner.hpp).
-      auto& g = c.genicam;
-      g.device = s.get_or<std::string>("device", c.scanner_driver == "sim_gige" ? "127.0.0.1" : "");
-      using G = drivers::GenicamConfig;
-      auto ranged = [&](const char* key, auto fallback, auto lim) {
-        return s.ranged<decltype(fallback)>(key, fallback, lim.lo, lim.hi);
-      };
-      g.profiles_per_frame = ranged("profiles_per_frame", g.profiles_per_frame, G::profiles_per_frame_limits);
-      g.trigger_line = s.get_or<std::string>("trigger_line", g.trigger_line);
-      g.packet_size_bytes = s.ranged<int>("packet_size_bytes", g.packet_size_bytes, 0, G::packet_size_bytes_limits.hi);  // 0: the device's
-      g.mark_columns = s.ranged<int>("mark_columns", g.mark_columns, 0, 2);
-      g.mono16_scale_mm = ranged("mono16_scale_mm", g.mono16_scale_mm, G::mono16_scale_mm_limits);
-      g.mono16_offset_mm = ranged("mono16_offset_mm", g.mono16_offset_mm, G::mono16_offset_mm_limits);
-      g.exposure_us = ranged("exposure_us", g.exposure_us, G::exposure_us_limits);
-      g.stream_buffers = ranged("stream_buffers", g.stream_buffers, G::stream_buffers_limits);
+}
+
+/// The simulated cell's truth where it differs from the models: what calibration must recover.
+SimTruth read_truth(const DaemonConfig& c, scancell::Section t) {
+  SimTruth truth;
+  if (t.has("sensor")) truth.sensor = sp::load_sensor(existing_file(c, t, "sensor"));
+  if (t.has("table_axis")) {
+    scancell::Section a = t.section("table_axis");
+    truth.table_axis_point_mm = a.vec3("point_mm");
+    truth.table_axis_direction = a.vec3("direction");
+    if (!(truth.table_axis_direction.norm() > 0.0)) a.fail(a.key_path("direction"), "must not be zero");
+    truth.table_axis_direction.normalize();
+    a.finish();
+  }
+  if (t.has("pose_error")) {
+    scancell::Section p = t.section("pose_error");
+    truth.pose_error.sigma_p_mm = p.non_negative("sigma_p_mm", 0.0);
+    truth.pose_error.sigma_a_rad = p.non_negative("sigma_a_rad", 0.0);
+    truth.pose_error.sigma_t_rad = p.non_negative("sigma_t_rad", 0.0);
+    p.finish();
+  }
+  truth.seed = t.get_or<std::uint64_t>("seed", 1);
+  t.finish();
+  return truth;
+}
+
+void read_scanner(DaemonConfig& c, scancell::Section s) {
+  c.scanner_driver = s.get<std::string>("driver");
+  if (c.scanner_driver != "sim" && c.scanner_driver != "sim_gige" && c.scanner_driver != "genicam")
+    s.fail(s.key_path("driver"), "must be sim, sim_gige or genicam, got '" + c.scanner_driver + "'");
+  c.scanner_seed = s.get_or<std::uint64_t>("seed", 1);
+  if (c.scanner_driver != "sim") read_genicam(c, s);
+  if (c.scanner_driver == "genicam") {
+    scancell::Section t = s.section("trigger");
+    c.trigger_chip = t.get<std::string>("chip");
+    c.trigger_offset = static_cast<unsigned>(t.ranged<int>("offset", 0, 0, 1023));
+    t.finish();
+  }
+  if (c.scanner_driver == "genicam" && s.has("truth"))
+    s.fail(s.key_path("truth"), "a simulated cell's truth with a real scanner (driver genicam)");
+  if (s.has("truth")) c.truth = read_truth(c, s.section("truth"));
+  s.finish();
+}
+
+/// Bounding-box jobs: the exploration program and the fusion of its images (docs/rough-scan.md).
+void read_rough_scan(DaemonConfig& c, scancell::Section s) {
+  auto& r = c.jobs.rough_scan;
+  r.table_steps = s.ranged("table_steps", r.table_steps, 3, 72);
+  if (s.has("tilts_rad")) {
+    r.tilts_rad.clear();
+    const YAML::Node n = s.raw("tilts_rad");
+    if (!n.IsSequence() || n.size() == 0) s.fail(s.key_path("tilts_rad"), "must be a list of camera tilts, rad");
+    for (std::size_t k = 0; k < n.size(); ++k) {
+      double t = 0.0;
       try {
-        drivers::check_genicam_config(g, "scanner");
-      } catch (const drivers::DriverError& e) {
-        s.fail(e.where, e.cause);  // e.where is the key path (scanner.device, ...)
+        t = n[k].as<double>();
+      } catch (const YAML::Exception&) {
+        s.fail(s.key_path("tilts_rad") + "[" + std::to_string(k) + "]", "cannot read it as a number");
       }
+      if (!(std::abs(t) < 1.5)) s.fail(s.key_path("tilts_rad") + "[" + std::to_string(k) + "]", "must be within ±1.5 rad");
+      r.tilts_rad.push_back(t);
     }
-    if (c.scanner_driver == "genicam") {
-      scancell::Section t = s.section("trigger");
-      c.trigger_chip = t.get<std::string>("chip");
-      c.trigger_offset = static_cast<unsigned>(t.ranged<int>("offset", 0, 0, 1023));
-      t.finish();
-    }
-    if (c.scanner_driver == "genicam" && s.has("truth"))
-      s.fail(s.key_path("truth"), "a simulated cell's truth with a real scanner (driver genicam)");
-    if (s.has("truth")) {
-      // The simulated cell's truth where it differs from the models: what calibration must recover.
-      scancell::Section t = s.section("truth");
-      SimTruth truth;
-      if (t.has("sensor")) truth.sensor = sp::load_sensor(path_key(t, "sensor"));
-      if (t.has("table_axis")) {
-        scancell::Section a = t.section("table_axis");
-        truth.table_axis_point_mm = a.vec3("point_mm");
-        truth.table_axis_direction = a.vec3("direction");
-        if (!(truth.table_axis_direction.norm() > 0.0)) a.fail(a.key_path("direction"), "must not be zero");
-        truth.table_axis_direction.normalize();
-        a.finish();
-      }
-      if (t.has("pose_error")) {
-        scancell::Section p = t.section("pose_error");
-        truth.pose_error.sigma_p_mm = p.non_negative("sigma_p_mm", 0.0);
-        truth.pose_error.sigma_a_rad = p.non_negative("sigma_a_rad", 0.0);
-        truth.pose_error.sigma_t_rad = p.non_negative("sigma_t_rad", 0.0);
-        p.finish();
-      }
-      truth.seed = t.get_or<std::uint64_t>("seed", 1);
-      t.finish();
-      c.truth = truth;
-    }
-    s.finish();
   }
-  if (y.has("rough_scan")) {
-    // Bounding-box jobs: the exploration program and the fusion of its images (docs/rough-scan.md).
-    scancell::Section s = y.section("rough_scan");
-    auto& r = c.jobs.rough_scan;
-    r.table_steps = s.get_or<int>("table_steps", r.table_steps);
-    if (r.table_steps < 3 || r.table_steps > 72) s.fail(s.key_path("table_steps"), "must be in [3, 72]");
-    if (s.has("tilts_rad")) {
-      r.tilts_rad.clear();
-      const YAML::Node n = s.raw("tilts_rad");
-      if (!n.IsSequence() || n.size() == 0) s.fail(s.key_path("tilts_rad"), "must be a list of camera tilts, rad");
-      for (std::size_t k = 0; k < n.size(); ++k) {
-        double t = 0.0;
-        try {
-          t = n[k].as<double>();
-        } catch (const YAML::Exception&) {
-          s.fail(s.key_path("tilts_rad") + "[" + std::to_string(k) + "]", "cannot read it as a number");
-        }
-        if (!(std::abs(t) < 1.5)) s.fail(s.key_path("tilts_rad") + "[" + std::to_string(k) + "]", "must be within ±1.5 rad");
-        r.tilts_rad.push_back(t);
-      }
-    }
-    r.fusion.voxel_mm = s.get_or<double>("voxel_mm", r.fusion.voxel_mm);
-    if (!(r.fusion.voxel_mm >= 0.25 && r.fusion.voxel_mm <= 10.0)) s.fail(s.key_path("voxel_mm"), "must be in [0.25, 10] mm");
-    r.fusion.truncation_voxels = s.get_or<double>("truncation_voxels", r.fusion.truncation_voxels);
-    if (!(r.fusion.truncation_voxels >= 1.0 && r.fusion.truncation_voxels <= 10.0)) s.fail(s.key_path("truncation_voxels"), "must be in [1, 10]");
-    r.fusion.occluding_views = s.get_or<int>("occluding_views", r.fusion.occluding_views);
-    if (r.fusion.occluding_views < 1) s.fail(s.key_path("occluding_views"), "must be >= 1");
-    s.finish();
+  r.fusion.voxel_mm = s.ranged("voxel_mm", r.fusion.voxel_mm, 0.25, 10.0);
+  r.fusion.truncation_voxels = s.ranged("truncation_voxels", r.fusion.truncation_voxels, 1.0, 10.0);
+  r.fusion.occluding_views = s.ranged("occluding_views", r.fusion.occluding_views, 1, 1000);
+  s.finish();
+}
+
+/// The only directories a client's submit may name files in (mesh, truth, spec, settings); resolved now,
+/// links included, so a client's path is compared with what it really is.
+void read_allowed_dirs(DaemonConfig& c, scancell::Section& s) {
+  const YAML::Node n = s.raw("allowed_dirs");
+  if (!n.IsSequence() || n.size() == 0) s.fail(s.key_path("allowed_dirs"), "must be a non-empty list of directories");
+  for (std::size_t k = 0; k < n.size(); ++k) {
+    const std::string at = s.key_path("allowed_dirs") + "[" + std::to_string(k) + "]";
+    if (!n[k].IsScalar()) s.fail(at, "must be a directory path");
+    const fs::path d = relative_to(c.file, n[k].as<std::string>());
+    std::error_code ec;
+    if (!fs::is_directory(d, ec)) s.fail(at, "'" + d.string() + "' is not a directory");
+    c.allowed_dirs.push_back(fs::canonical(d));
   }
-  if (y.has("jobs")) {
-    scancell::Section s = y.section("jobs");
-    c.jobs.max_rounds = s.get_or<int>("max_rounds", c.jobs.max_rounds);
-    if (c.jobs.max_rounds < 1 || c.jobs.max_rounds > 50) s.fail(s.key_path("max_rounds"), "must be in [1, 50]");
-    c.jobs.retire_after_failures = s.get_or<int>("retire_after_failures", c.jobs.retire_after_failures);
-    if (c.jobs.retire_after_failures < 1 || c.jobs.retire_after_failures > 10)
-      s.fail(s.key_path("retire_after_failures"), "must be in [1, 10]");
-    c.jobs.failed_row_weight = s.get_or<double>("failed_row_weight", c.jobs.failed_row_weight);
-    if (!(c.jobs.failed_row_weight >= 0.0 && c.jobs.failed_row_weight <= 1.0))
-      s.fail(s.key_path("failed_row_weight"), "must be in [0, 1]");
-    c.jobs.min_gain_per_view_mm2 = s.non_negative("min_gain_per_view_mm2", c.jobs.min_gain_per_view_mm2);
-    c.jobs.next_setup_min_area_mm2 = s.ranged("next_setup_min_area_mm2", c.jobs.next_setup_min_area_mm2, 0.0, 1e6);
-    c.jobs.max_setups = s.ranged("max_setups", c.jobs.max_setups, 1, kMaxSetups);
-    c.jobs.sim_placement_error_mm = s.ranged("sim_placement_error_mm", c.jobs.sim_placement_error_mm, 0.0, 50.0);
-    c.jobs.sim_placement_error_rad = s.ranged("sim_placement_error_rad", c.jobs.sim_placement_error_rad, 0.0, M_PI);
-    c.jobs.coverage.row_fraction = s.get_or<double>("row_fraction", c.jobs.coverage.row_fraction);
-    if (!(c.jobs.coverage.row_fraction > 0.0 && c.jobs.coverage.row_fraction <= 1.0))
-      s.fail(s.key_path("row_fraction"), "must be in (0, 1]");
-    c.jobs.coverage.normal_tolerance_mm = s.non_negative("normal_tolerance_mm", 0.0);
-    c.jobs.move_timeout = std::chrono::milliseconds(static_cast<long>(1000.0 * s.get_or<double>("move_timeout_s", 60.0)));
-    if (c.jobs.move_timeout.count() <= 0) s.fail(s.key_path("move_timeout_s"), "must be > 0");
-    c.jobs.scan_speed_mm_s = s.non_negative("scan_speed_mm_s", 0.0);
-    c.jobs.trigger_width = std::chrono::microseconds(static_cast<long>(s.non_negative("trigger_width_us", 0.0)));
-    c.jobs.fill_sweeps = s.ranged("fill_sweeps", c.jobs.fill_sweeps, 0, 5);
-    c.jobs.cloud_spacing_mm = s.ranged("cloud_spacing_mm", c.jobs.cloud_spacing_mm, 0.0, 10.0);
-    c.jobs.register_views = s.get_or<bool>("register_views", c.jobs.register_views);
-    c.jobs.fused_model_sigma_mm = s.non_negative("fused_model_sigma_mm", c.jobs.fused_model_sigma_mm);
-    c.jobs.planner_threads = s.get_or<int>("planner_threads", 0);
-    if (c.jobs.planner_threads < 0) s.fail(s.key_path("planner_threads"), "must be >= 0 (0: all cores)");
-    c.home_timeout = std::chrono::milliseconds(static_cast<long>(1000.0 * s.get_or<double>("home_timeout_s", 60.0)));
-    if (s.has("phase_trace_file")) c.jobs.phase_trace_file = relative_to(c.file, s.get<std::string>("phase_trace_file"));
-    if (s.has("allowed_dirs")) {
-      // The only directories a client's submit may name files in (mesh, truth, spec, settings); resolved
-      // now, links included, so a client's path is compared with what it really is.
-      const YAML::Node n = s.raw("allowed_dirs");
-      if (!n.IsSequence() || n.size() == 0) s.fail(s.key_path("allowed_dirs"), "must be a non-empty list of directories");
-      for (std::size_t k = 0; k < n.size(); ++k) {
-        const std::string at = s.key_path("allowed_dirs") + "[" + std::to_string(k) + "]";
-        if (!n[k].IsScalar()) s.fail(at, "must be a directory path");
-        const fs::path d = relative_to(c.file, n[k].as<std::string>());
-        std::error_code ec;
-        if (!fs::is_directory(d, ec)) s.fail(at, "'" + d.string() + "' is not a directory");
-        c.allowed_dirs.push_back(fs::canonical(d));
-      }
-    }
-    s.finish();
-  }
+}
+
+/// jobs: the 3M loop's limits, setups, execution and the daemon's own timeouts, each with its range.
+void read_jobs(DaemonConfig& c, scancell::Section s) {
+  auto& j = c.jobs;
+  j.max_rounds = s.ranged("max_rounds", j.max_rounds, 1, 50);
+  j.retire_after_failures = s.ranged("retire_after_failures", j.retire_after_failures, 1, 10);
+  j.failed_row_weight = s.ranged("failed_row_weight", j.failed_row_weight, 0.0, 1.0);
+  j.min_gain_per_view_mm2 = s.non_negative("min_gain_per_view_mm2", j.min_gain_per_view_mm2);
+  j.next_setup_min_area_mm2 = s.ranged("next_setup_min_area_mm2", j.next_setup_min_area_mm2, 0.0, 1e6);
+  j.max_setups = s.ranged("max_setups", j.max_setups, 1, kMaxSetups);
+  j.sim_placement_error_mm = s.ranged("sim_placement_error_mm", j.sim_placement_error_mm, 0.0, 50.0);
+  j.sim_placement_error_rad = s.ranged("sim_placement_error_rad", j.sim_placement_error_rad, 0.0, M_PI);
+  j.coverage.row_fraction = s.get_or<double>("row_fraction", j.coverage.row_fraction);
+  if (!(j.coverage.row_fraction > 0.0 && j.coverage.row_fraction <= 1.0)) s.fail(s.key_path("row_fraction"), "must be in (0, 1]");
+  j.coverage.normal_tolerance_mm = s.non_negative("normal_tolerance_mm", 0.0);
+  j.move_timeout = std::chrono::milliseconds(static_cast<long>(1000.0 * s.get_or<double>("move_timeout_s", 60.0)));
+  if (j.move_timeout.count() <= 0) s.fail(s.key_path("move_timeout_s"), "must be > 0");
+  j.scan_speed_mm_s = s.non_negative("scan_speed_mm_s", 0.0);
+  j.trigger_width = std::chrono::microseconds(static_cast<long>(s.non_negative("trigger_width_us", 0.0)));
+  j.fill_sweeps = s.ranged("fill_sweeps", j.fill_sweeps, 0, 5);
+  j.cloud_spacing_mm = s.ranged("cloud_spacing_mm", j.cloud_spacing_mm, 0.0, 10.0);
+  j.register_views = s.get_or<bool>("register_views", j.register_views);
+  j.fused_model_sigma_mm = s.non_negative("fused_model_sigma_mm", j.fused_model_sigma_mm);
+  j.planner_threads = s.get_or<int>("planner_threads", 0);
+  if (j.planner_threads < 0) s.fail(s.key_path("planner_threads"), "must be >= 0 (0: all cores)");
+  c.home_timeout = std::chrono::milliseconds(static_cast<long>(1000.0 * s.get_or<double>("home_timeout_s", 60.0)));
+  if (s.has("phase_trace_file")) j.phase_trace_file = relative_to(c.file, s.get<std::string>("phase_trace_file"));
+  if (s.has("allowed_dirs")) read_allowed_dirs(c, s);
+  s.finish();
+}
+
+}  // namespace
+
+DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_dir, const std::string& socket) {
+  DaemonConfig c;
+  c.file = fs::absolute(file);
+  YAML::Node holder;
+  scancell::Section y = scancell::open_root(c.file, holder);
+  read_files(c, y, data_dir);
+  read_control(c, y.section("control"), socket);
+  read_scanner(c, y.section("scanner"));
+  if (y.has("rough_scan")) read_rough_scan(c, y.section("rough_scan"));
+  if (y.has("jobs")) read_jobs(c, y.section("jobs"));
   y.finish();
   c.jobs.jobs_dir = c.data_dir / "jobs";
   c.models.cell = sp::load_cell(c.cell_file);
