@@ -328,6 +328,110 @@ json setups_json(Journal& journal, std::int64_t job) {
 }
 }  // namespace
 
+namespace {
+
+/// What the executed views cost the cell at its real speeds (the plan's move and sweep times; the simulated
+/// drives may run faster): the figure issue 15 compares with an oracle's plan.
+json cell_time_json(Journal& journal, std::int64_t job) {
+  double move_s = 0.0, scan_s = 0.0;
+  for (const auto& [plan, round] : journal.plan_rounds(job))
+    if (round >= 0)
+      for (const auto& v : journal.views(plan))
+        if (v.stored) {
+          const json pj = json::parse(v.pose_json);
+          move_s += pj.value("move_s", 0.0);
+          scan_s += pj.value("scan_s", 0.0);
+        }
+  return {{"cell_time_s", move_s + scan_s}, {"cell_move_s", move_s}, {"cell_scan_s", scan_s}};
+}
+
+/// How the operator is to place the object (the simulated cell placed it so): the chosen pose's rotation and
+/// why, with every option's figures in the round-0 plan info.
+json placement_json(const json& placement) {
+  const json& chosen = placement.at("options").at(placement.at("chosen").get<int>() - 1);
+  return {{"reason", placement.at("reason")},
+          {"resting_pose", chosen.at("resting_pose")},
+          {"object_to_table_row_major", chosen.at("object_to_table_row_major")},
+          {"options", placement.at("options").size()}};
+}
+
+}  // namespace
+
+JobRunner::Product JobRunner::write_product(const Job& j, const std::vector<StoredView>& stored, json& result) {
+  // Every spec-compliant registered sample, whatever the end (an aborted job keeps what it measured). A
+  // failure to write it is reported in the result, not hidden, and does not undo the job.
+  Product out;
+  const auto cloud = settings_.jobs_dir / std::to_string(j.id) / "cloud.ply";
+  try {
+    const CloudSummary& c = out.cloud.emplace(write_job_cloud(stored, j.id, j.spec, cloud, true, settings_.cloud_spacing_mm));
+    result["cloud"] = cloud.string();
+    result["cloud_points"] = c.points;
+    const auto model = cloud.parent_path() / "model.ply";
+    const ModelSummary& m = out.model.emplace(write_job_model(c, j.spec, model));
+    result["model"] = model.string();
+    result["model_triangles"] = m.triangles;
+    result["model_open_edges"] = m.boundary_edges;
+    result["model_voxel_mm"] = m.voxel_mm;
+  } catch (const std::exception& e) {
+    result["product_error"] = e.what();
+  }
+  return out;
+}
+
+void JobRunner::rows_into(Job& j, JobState state, const json* advice, json& result) {
+  const std::vector<std::uint32_t> rows = j.coverage->unmeasured_rows();
+  const RowTally t = tally_unmeasured(*j.rough, rows, j.unmeasurable);
+  result["rough_area_mm2"] = j.rough->total_area_mm2;
+  result["unmeasured_rows"] = rows.size();
+  result["unmeasured_area_mm2"] = t.unmeasured_area;
+  result["unmeasurable_rows"] = j.unmeasurable.size();  // no candidate view of this cell measures them
+  result["open_rows"] = t.open;                        // measurable by the plan's estimate, not measured, seen surface
+  result["open_area_mm2"] = t.open_area;
+  if (!j.rough->hypothetical.empty()) {
+    result["hypothetical_rows"] = std::count(j.rough->hypothetical.begin(), j.rough->hypothetical.end(), 1);  // the rough scan's guesses
+    result["hypothetical_unmeasured_rows"] = t.hypothetical;  // of those, not measured (incl. unmeasurable)
+    result["hypothetical_unmeasured_area_mm2"] = t.hypothetical_area;
+  }
+  if (advice) result["next_setup"] = *advice;
+  else if (state != JobState::aborted && settings_.next_setup_min_area_mm2 > 0.0 && t.unmeasured_area >= settings_.next_setup_min_area_mm2 &&
+           !j.object.vertices.empty())
+    result["next_setup"] = next_setup(j);
+  const auto dir = settings_.jobs_dir / std::to_string(j.id);
+  result["unmeasured_file"] = write_unmeasured_rows(*j.rough, rows, dir).string();
+  // The closed loop's account: what each round predicted and delivered, and the rows it gave up on.
+  const std::vector<json> infos = round_infos(j);
+  if (!infos.empty()) {
+    std::vector<std::uint8_t> measured = j.coverage->measured_rows();
+    for (auto r : j.unmeasurable) measured[r] = 1;
+    result.update(closed_loop_account(*j.rough, infos, measured, j.progress.measured, settings_.retire_after_failures, dir));
+  }
+}
+
+void JobRunner::report_into(const Job& j, const Product& product, json& result) {
+  // The cloud and the model against the reference: the submitted mesh (a bounding-box job has none but, in
+  // simulation, the object on the table).
+  const bool bbox = j.request.bbox_mm.has_value();
+  const sp::TriangleMesh& reference = bbox ? j.truth_object : j.object;
+  if (!product.cloud || !product.model || reference.triangles.empty()) return;
+  json coverage;
+  for (const char* k : {"measured_coverage", "estimated_coverage", "verified_mv", "rough_area_mm2", "unmeasured_area_mm2",
+                        "unmeasurable_rows", "open_area_mm2"})
+    if (result.contains(k)) coverage[k] = result[k];
+  try {
+    const auto file = settings_.jobs_dir / std::to_string(j.id) / "report.json";
+    const json r = write_job_report(file, j.id, j.spec, reference, bbox ? j.request.truth : j.request.mesh,
+                                    bbox ? "simulation truth (the object on the table)" : "submitted mesh", *product.cloud,
+                                    *product.model, coverage);
+    result["report"] = file.string();
+    result["cloud_deviation_rms_mm"] = r["cloud"]["rms_mm"];
+    result["model_deviation_p95_mm"] = r["model"]["p95_abs_mm"];
+    if (r.contains("deviation_png")) result["deviation_png"] = r["deviation_png"];
+    if (r.contains("deviation_png_error")) result["deviation_png_error"] = r["deviation_png_error"];
+  } catch (const std::exception& e) {
+    result["report_error"] = e.what();
+  }
+}
+
 void JobRunner::finish(Job& j, JobState state, const std::string& cause, const json* advice) {
   json result = {{"state", to_string(state)},
                  {"rounds", j.round + 1},
@@ -338,86 +442,17 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause, const j
     if (round >= 0) views += static_cast<int>(journal_.scans(plan).size());  // the rough scan's are not views
   // The stored views that count, read once: for the product and, in simulation, the ground-truth checks.
   std::vector<StoredView> stored = load_job_views(journal_, j.id);
-  // The job's product: every spec-compliant registered sample, whatever the end (an aborted job keeps what
-  // it measured). A failure to write it is reported in the result, not hidden, and does not undo the job.
-  std::optional<CloudSummary> product_cloud;
-  std::optional<ModelSummary> product_model;
-  if (views > 0) {
-    const auto cloud = settings_.jobs_dir / std::to_string(j.id) / "cloud.ply";
-    try {
-      const CloudSummary& c = product_cloud.emplace(write_job_cloud(stored, j.id, j.spec, cloud, true, settings_.cloud_spacing_mm));
-      result["cloud"] = cloud.string();
-      result["cloud_points"] = c.points;
-      const auto model = cloud.parent_path() / "model.ply";
-      const ModelSummary& m = product_model.emplace(write_job_model(c, j.spec, model));
-      result["model"] = model.string();
-      result["model_triangles"] = m.triangles;
-      result["model_open_edges"] = m.boundary_edges;
-      result["model_voxel_mm"] = m.voxel_mm;
-    } catch (const std::exception& e) {
-      result["product_error"] = e.what();
-    }
-  }
+  const Product product = views > 0 ? write_product(j, stored, result) : Product{};
   std::vector<sp::RangeImage> images;
   if (state != JobState::aborted)
     for (auto& v : stored) images.push_back(std::move(v.image));
   stored.clear();
   result["views"] = views;
-  {
-    // What the executed views cost the cell at its real speeds (the plan's move and sweep times; the
-    // simulated drives may run faster): the figure issue 15 compares with an oracle's plan.
-    double move_s = 0.0, scan_s = 0.0;
-    for (const auto& [plan, round] : journal_.plan_rounds(j.id))
-      if (round >= 0)
-        for (const auto& v : journal_.views(plan))
-          if (v.stored) {
-            const json pj = json::parse(v.pose_json);
-            move_s += pj.value("move_s", 0.0);
-            scan_s += pj.value("scan_s", 0.0);
-          }
-    result["cell_time_s"] = move_s + scan_s;
-    result["cell_move_s"] = move_s;
-    result["cell_scan_s"] = scan_s;
-  }
+  result.update(cell_time_json(journal_, j.id));
   if (j.max_setups > 1) result["setups"] = setups_json(journal_, j.id);
   if (!j.rough_quality.is_null()) result["rough_model"] = j.rough_quality;
-  if (!j.placement.is_null()) {
-    // How the operator is to place the object (the simulated cell placed it so): the chosen pose's rotation
-    // and why, with every option's figures in the round-0 plan info.
-    const json& chosen = j.placement.at("options").at(j.placement.at("chosen").get<int>() - 1);
-    result["placement"] = {{"reason", j.placement.at("reason")},
-                           {"resting_pose", chosen.at("resting_pose")},
-                           {"object_to_table_row_major", chosen.at("object_to_table_row_major")},
-                           {"options", j.placement.at("options").size()}};
-  }
-  if (j.rough && j.coverage) {
-    const std::vector<std::uint32_t> rows = j.coverage->unmeasured_rows();
-    const RowTally t = tally_unmeasured(*j.rough, rows, j.unmeasurable);
-    result["rough_area_mm2"] = j.rough->total_area_mm2;
-    result["unmeasured_rows"] = rows.size();
-    result["unmeasured_area_mm2"] = t.unmeasured_area;
-    result["unmeasurable_rows"] = j.unmeasurable.size();  // no candidate view of this cell measures them
-    result["open_rows"] = t.open;                        // measurable by the plan's estimate, not measured, seen surface
-    result["open_area_mm2"] = t.open_area;
-    if (!j.rough->hypothetical.empty()) {
-      result["hypothetical_rows"] = std::count(j.rough->hypothetical.begin(), j.rough->hypothetical.end(), 1);  // the rough scan's guesses
-      result["hypothetical_unmeasured_rows"] = t.hypothetical;  // of those, not measured (incl. unmeasurable)
-      result["hypothetical_unmeasured_area_mm2"] = t.hypothetical_area;
-    }
-    if (advice) result["next_setup"] = *advice;
-    else if (state != JobState::aborted && settings_.next_setup_min_area_mm2 > 0.0 && t.unmeasured_area >= settings_.next_setup_min_area_mm2 &&
-             !j.object.vertices.empty())
-      result["next_setup"] = next_setup(j);
-    const auto dir = settings_.jobs_dir / std::to_string(j.id);
-    result["unmeasured_file"] = write_unmeasured_rows(*j.rough, rows, dir).string();
-    // The closed loop's account: what each round predicted and delivered, and the rows it gave up on.
-    const std::vector<json> infos = round_infos(j);
-    if (!infos.empty()) {
-      std::vector<std::uint8_t> measured = j.coverage->measured_rows();
-      for (auto r : j.unmeasurable) measured[r] = 1;
-      result.update(closed_loop_account(*j.rough, infos, measured, j.progress.measured, settings_.retire_after_failures, dir));
-    }
-  }
+  if (!j.placement.is_null()) result["placement"] = placement_json(j.placement);
+  if (j.rough && j.coverage) rows_into(j, state, advice, result);
   // Simulation: the checks against the object on the table. Ground truth exists only where the scanner is
   // simulated in-process: a device on the wire (sim_gige, a real scanner) delivers what a real one does, and
   // the checks that need the true hit points are skipped.
@@ -428,29 +463,7 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause, const j
     result.update(simulation_truth_checks(images, j.rough ? &*j.rough : nullptr, j.spec, settings_.coverage, j.truth_object,
                                           j.request.truth.empty() ? j.request.mesh : j.request.truth,
                                           settings_.jobs_dir / std::to_string(j.id)));
-  // The inspection report (issue 19): the cloud and the model against the reference, the submitted mesh (a
-  // bounding-box job has none but, in simulation, the object on the table).
-  const bool bbox = j.request.bbox_mm.has_value();
-  const sp::TriangleMesh& reference = bbox ? j.truth_object : j.object;
-  if (product_cloud && product_model && !reference.triangles.empty()) {
-    json coverage;
-    for (const char* k : {"measured_coverage", "estimated_coverage", "verified_mv", "rough_area_mm2", "unmeasured_area_mm2",
-                          "unmeasurable_rows", "open_area_mm2"})
-      if (result.contains(k)) coverage[k] = result[k];
-    try {
-      const auto file = settings_.jobs_dir / std::to_string(j.id) / "report.json";
-      const json r = write_job_report(file, j.id, j.spec, reference, bbox ? j.request.truth : j.request.mesh,
-                                      bbox ? "simulation truth (the object on the table)" : "submitted mesh", *product_cloud,
-                                      *product_model, coverage);
-      result["report"] = file.string();
-      result["cloud_deviation_rms_mm"] = r["cloud"]["rms_mm"];
-      result["model_deviation_p95_mm"] = r["model"]["p95_abs_mm"];
-      if (r.contains("deviation_png")) result["deviation_png"] = r["deviation_png"];
-      if (r.contains("deviation_png_error")) result["deviation_png_error"] = r["deviation_png_error"];
-    } catch (const std::exception& e) {
-      result["report_error"] = e.what();
-    }
-  }
+  report_into(j, product, result);  // the inspection report (issue 19)
   journal_.set_result(j.id, result.dump());
   transition(j, state, cause);
 }
@@ -636,24 +649,26 @@ json JobRunner::execute_round(Job& j, const std::vector<std::int64_t>& plans, co
 /// After a round: its predicted and realized gain and the rows it failed, then the end (done, or stalled:
 /// every open row given up, max_rounds, nothing new measured, a replan with no view or too little gain per
 /// view) or the next round's plan, journalled. Returns the end state, or nothing to run the next round.
+/// A round's account in the journal: its predicted and realized gain, and the rows excused by lost profiles.
+void JobRunner::journal_round(Job& j, std::int64_t plan, const json& info, const std::vector<json>& infos) {
+  const json g = round_gains(infos, j.progress.measured, j.rough->total_area_mm2).back();
+  journal_.event(j.id, "round " + std::to_string(j.round) + ": " + std::to_string(info.value("views", 0)) + " views, predicted gain " +
+                         fmt(g.at("predicted_gain_mm2").get<double>(), 1) + " mm2, realized " +
+                         fmt(g.at("realized_gain_mm2").get<double>(), 1) + " mm2" +
+                         (g.at("under_20_percent").get<bool>() ? " (under 20 % of the prediction)" : ""));
+  std::vector<std::uint32_t> passed;
+  for (const auto& [view, rows] : j.excused[plan]) passed.insert(passed.end(), rows.begin(), rows.end());
+  std::sort(passed.begin(), passed.end());
+  passed.erase(std::unique(passed.begin(), passed.end()), passed.end());
+  if (!passed.empty())
+    journal_.event(j.id, "round " + std::to_string(j.round) + ": " + std::to_string(passed.size()) + " predicted rows lay where " +
+                           std::to_string(j.excused[plan].size()) + (j.excused[plan].size() == 1 ? " view's sweep" : " views' sweeps") +
+                           " lost profiles; not counted as failures");
+}
+
 std::optional<JobState> JobRunner::close_or_replan(Job& j, std::int64_t plan, const json& info, const std::atomic<int>& stop) {
   const std::vector<json> infos = round_infos(j);
-  const double total_mm2 = j.rough->total_area_mm2;
-  {
-    const json g = round_gains(infos, j.progress.measured, total_mm2).back();
-    journal_.event(j.id, "round " + std::to_string(j.round) + ": " + std::to_string(info.value("views", 0)) + " views, predicted gain " +
-                           fmt(g.at("predicted_gain_mm2").get<double>(), 1) + " mm2, realized " +
-                           fmt(g.at("realized_gain_mm2").get<double>(), 1) + " mm2" +
-                           (g.at("under_20_percent").get<bool>() ? " (under 20 % of the prediction)" : ""));
-    std::vector<std::uint32_t> passed;
-    for (const auto& [view, rows] : j.excused[plan]) passed.insert(passed.end(), rows.begin(), rows.end());
-    std::sort(passed.begin(), passed.end());
-    passed.erase(std::unique(passed.begin(), passed.end()), passed.end());
-    if (!passed.empty())
-      journal_.event(j.id, "round " + std::to_string(j.round) + ": " + std::to_string(passed.size()) + " predicted rows lay where " +
-                             std::to_string(j.excused[plan].size()) + (j.excused[plan].size() == 1 ? " view's sweep" : " views' sweeps") +
-                             " lost profiles; not counted as failures");
-  }
+  journal_round(j, plan, info, infos);
   // Rows the executed rounds were predicted to measure and did not: retired after
   // jobs.retire_after_failures such rounds (needs attention), down-weighted before.
   std::vector<std::uint8_t> measured_now = j.coverage->measured_rows();
@@ -673,7 +688,6 @@ std::optional<JobState> JobRunner::close_or_replan(Job& j, std::int64_t plan, co
   const RowTally t = tally_unmeasured(*j.rough, j.coverage->unmeasured_rows(), j.unmeasurable);
   const std::size_t open = t.open, guessed = t.guessed;
   const double open_area = t.open_area, impossible_area = t.impossible_area, guessed_area = t.guessed_area;
-  const double total = j.rough->total_area_mm2;
   const std::string summary = "measured " + fmt(j.progress.measured) + " of the rough model; " + std::to_string(open) +
                               " measurable rows left (" + fmt(open_area, 1) + " mm2), " +
                               fmt(impossible_area, 1) + " mm2 no view in this cell can measure" +
@@ -700,6 +714,15 @@ std::optional<JobState> JobRunner::close_or_replan(Job& j, std::int64_t plan, co
     return end_setup(j, JobState::stalled, "round " + std::to_string(j.round) + " measured nothing new; " + std::to_string(n_retired) +
                                      " rows (" + fmt(retired_area, 1) + " mm2) need attention: " + summary);
   }
+  return replan(j, measured_now, fails, retired, n_retired, open, summary, stop);
+}
+
+/// The next round of the setup: a plan for the open rows (retired ones left out, failed ones down-weighted),
+/// journalled; or the end when it gains nothing or too little per view.
+std::optional<JobState> JobRunner::replan(Job& j, const std::vector<std::uint8_t>& measured_now, const std::vector<std::uint8_t>& fails,
+                                          const std::vector<std::uint8_t>& retired, std::size_t n_retired, std::size_t open,
+                                          const std::string& summary, const std::atomic<int>& stop) {
+  const double total = j.rough->total_area_mm2;
   transition(j, JobState::replanning, std::to_string(open) + " rows left");
   sp::PlannerSettings replan = j.settings;
   // Later rounds go after the leftovers only; their views register to the model through the rows they

@@ -19,6 +19,7 @@
 #include <nlohmann/json.hpp>
 
 #include "daemon/job_request.hpp"
+#include "daemon/job_product.hpp"
 #include "daemon/journal.hpp"
 #include "daemon/phase_trace.hpp"
 #include "drivers/axis.hpp"
@@ -127,6 +128,10 @@ class JobRunner {
   void restore(Job& j, const std::vector<std::int64_t>& plans);
   nlohmann::json execute_round(Job& j, const std::vector<std::int64_t>& plans, const std::atomic<int>& stop);
   std::optional<JobState> close_or_replan(Job& j, std::int64_t plan, const nlohmann::json& info, const std::atomic<int>& stop);
+  void journal_round(Job& j, std::int64_t plan, const nlohmann::json& info, const std::vector<nlohmann::json>& infos);
+  std::optional<JobState> replan(Job& j, const std::vector<std::uint8_t>& measured_now, const std::vector<std::uint8_t>& fails,
+                                 const std::vector<std::uint8_t>& retired, std::size_t n_retired, std::size_t open,
+                                 const std::string& summary, const std::atomic<int>& stop);
   void execute_view(Job& j, std::int64_t plan, const ViewRecord& v, const std::atomic<int>& stop);
   /// The rough scan of a job given a bounding box: exploration views, stored, fused into jobs/ID/rough.off.
   void rough_scan(Job& j, const std::atomic<int>& stop);
@@ -148,6 +153,16 @@ class JobRunner {
   void explore(Job& j, std::int64_t plan, const planner::CellModel& table_cell, const planner::TriangleMesh& scene, const std::string& what,
                const std::atomic<int>& stop);
   void finish(Job& j, JobState state, const std::string& cause, const nlohmann::json* advice = nullptr);
+  /// The job's product (cloud.ply, model.ply); what was written goes into `result`, a failure as product_error.
+  struct Product {
+    std::optional<CloudSummary> cloud;
+    std::optional<ModelSummary> model;
+  };
+  Product write_product(const Job& j, const std::vector<StoredView>& stored, nlohmann::json& result);
+  /// The rough model's rows in the result: unmeasured, open, hypothetical, next setup, the closed loop's account.
+  void rows_into(Job& j, JobState state, const nlohmann::json* advice, nlohmann::json& result);
+  /// The inspection report (issue 19) against the reference, when the product was written.
+  void report_into(const Job& j, const Product& product, nlohmann::json& result);
   /// The latest further setup's exploration plan not yet followed by the setup's first plan round.
   std::optional<std::int64_t> pending_setup(std::int64_t job);
   /// Simulation: where the part really lies in setup `setup` (the placement asked, off by the simulated
