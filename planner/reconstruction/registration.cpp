@@ -203,92 +203,163 @@ void apply_correction(RangeImage& img, const Eigen::Isometry3d& c) {
     if (s.valid()) s.camera_mm = (to_view * s.object_mm.cast<double>()).cast<float>();
 }
 
-IcpResult register_points(const std::vector<Eigen::Vector3d>& pts_in, const ModelCloud& model, const IcpOptions& o,
-                          const std::vector<Eigen::Vector3d>& pivots_in, const std::vector<Eigen::Vector3d>& normals_in) {
-  IcpResult r;
+namespace {
+
+using Vec6 = Eigen::Matrix<double, 6, 1>;
+using Mat6 = Eigen::Matrix<double, 6, 6>;
+
+/// The samples ICP works on: at most ~20k, evenly strided (plenty for six unknowns, and the cost stays
+/// bounded); where normals are known, a sample without one (an image border, a depth step) is left out: its
+/// pair could only be checked by the offset direction, which lets a face's edge pair with the next face.
+struct IcpSamples {
+  std::vector<Eigen::Vector3d> pts, pivots, normals;
+};
+IcpSamples icp_samples(const std::vector<Eigen::Vector3d>& pts_in, const std::vector<Eigen::Vector3d>& pivots_in,
+                       const std::vector<Eigen::Vector3d>& normals_in) {
   if (!pivots_in.empty() && pivots_in.size() != pts_in.size())
     throw std::invalid_argument("register_points: " + std::to_string(pivots_in.size()) + " pivots for " + std::to_string(pts_in.size()) + " points");
   if (!normals_in.empty() && normals_in.size() != pts_in.size())
     throw std::invalid_argument("register_points: " + std::to_string(normals_in.size()) + " normals for " + std::to_string(pts_in.size()) + " points");
-  // At most ~20k samples, evenly strided: plenty for six unknowns, and the cost stays bounded.
   const std::size_t stride = std::max<std::size_t>(1, pts_in.size() / 20000);
-  std::vector<Eigen::Vector3d> pts, pivots, normals;
+  IcpSamples out;
   for (std::size_t i = 0; i < pts_in.size(); i += stride) {
-    // Where normals are known, a sample without one (an image border, a depth step) is left out: its pair
-    // could only be checked by the offset direction, which lets a face's edge pair with the next face.
     if (!normals_in.empty() && !(normals_in[i].squaredNorm() > 0.5)) continue;
-    pts.push_back(pts_in[i]);
-    pivots.push_back(pivots_in.empty() ? Eigen::Vector3d::Zero() : pivots_in[i]);
-    normals.push_back(normals_in.empty() ? Eigen::Vector3d::Zero() : normals_in[i]);
+    out.pts.push_back(pts_in[i]);
+    out.pivots.push_back(pivots_in.empty() ? Eigen::Vector3d::Zero() : pivots_in[i]);
+    out.normals.push_back(normals_in.empty() ? Eigen::Vector3d::Zero() : normals_in[i]);
   }
-  if (pts.size() < 50) {
-    r.why = std::to_string(pts.size()) + " samples" + (normals_in.empty() ? "" : " with a surface normal") + ", too few to register";
+  return out;
+}
+
+/// One iteration's point-to-plane normal equations about the current correction (rotation w about each
+/// sample's pivot, then translation d): ata x = atb, with disp the samples' own motion per unknown.
+struct NormalEquations {
+  Mat6 ata = Mat6::Zero(), disp = Mat6::Zero();
+  Vec6 atb = Vec6::Zero();
+  std::size_t pairs = 0;
+  double ss = 0.0;
+};
+NormalEquations pair_with_model(const IcpSamples& s, const std::vector<Eigen::Vector3d>& moved, const std::vector<Eigen::Vector3d>& lever,
+                                const Eigen::Matrix3d& w, const ModelCloud& model, const IcpOptions& o) {
+  const double cos_max = std::cos(o.max_normal_angle_rad);
+  NormalEquations e;
+  for (std::size_t i = 0; i < s.pts.size(); ++i) {
+    const Eigen::Vector3d& p = moved[i];
+    const long k = model.nearest(p, o.max_distance_mm);
+    if (k < 0) continue;
+    const Eigen::Vector3d& q = model.point(static_cast<std::size_t>(k));
+    const Eigen::Vector3d& n = model.normal(static_cast<std::size_t>(k));
+    const Eigen::Vector3d off = p - q;
+    if (s.normals[i].squaredNorm() > 0.5) {
+      // The sample's own normal (turned with the correction) must agree with the model's.
+      if ((w * s.normals[i]).dot(n) < cos_max) continue;
+    } else if (off.norm() > 1e-9 && std::abs(off.normalized().dot(n)) < cos_max && off.norm() > 0.5 * o.max_distance_mm) {
+      continue;  // normal unknown: reject pairs across thin walls by the offset direction
+    }
+    // Point-to-plane, linearised about the current correction: a motion (ω, v) moves the sample by
+    // g = ω × l + v (l its lever from its pivot) and its residual n·(p - q) by n·g; rotations in units of
+    // lever_mm so that the unknowns compare like with like.
+    Eigen::Matrix<double, 3, 6> g;
+    g.leftCols<3>() = -crossmat(lever[i]) / o.lever_mm;
+    g.rightCols<3>().setIdentity();
+    const Vec6 row = g.transpose() * n;
+    const double res = n.dot(off);
+    e.ata += row * row.transpose();
+    e.disp += g.transpose() * g;
+    e.atb -= row * res;
+    e.ss += res * res;
+    ++e.pairs;
+  }
+  return e;
+}
+
+/// Solves in the generalized eigenbasis (disp-orthonormal: x = Σ v_e (v_e·atb) / λ_e), leaving out the slides
+/// (λ under min_conditioning), which it counts in r.free_directions.
+Vec6 solve_fixed_directions(const Eigen::GeneralizedSelfAdjointEigenSolver<Mat6>& es, const Vec6& atb, const IcpOptions& o, IcpResult& r) {
+  Vec6 x = Vec6::Zero();
+  r.free_directions = 0;
+  for (int e = 0; e < 6; ++e) {
+    const double lambda = es.eigenvalues()(e);
+    if (lambda < o.min_conditioning) {
+      ++r.free_directions;
+      continue;
+    }
+    x += es.eigenvectors().col(e) * (es.eigenvectors().col(e).dot(atb) / lambda);
+  }
+  return x;
+}
+
+/// Trust region: no sample moves more than half the pairing distance in one step, so that a poorly fixed
+/// direction cannot throw the view off the model before the correspondences catch up; and the view turns by
+/// at most 0.05 rad (3°) a step, where the linearisation holds.
+void limit_step(Vec6& x, const std::vector<Eigen::Vector3d>& lever, const IcpOptions& o) {
+  double most = 0.0;
+  const Eigen::Vector3d om = x.head<3>() / o.lever_mm;
+  for (std::size_t i = 0; i < lever.size(); i += std::max<std::size_t>(1, lever.size() / 200))
+    most = std::max(most, (om.cross(lever[i]) + x.tail<3>()).norm());
+  if (most > 0.5 * o.max_distance_mm) x *= 0.5 * o.max_distance_mm / most;
+  const double turn = x.head<3>().norm() / o.lever_mm;
+  if (turn > 0.05) x *= 0.05 / turn;
+}
+
+/// The converged correction's account: how far it moves the samples, refused when farther than the positioner
+/// can err (a slide along a weakly fixed direction: a face with a sliver of another, not the pose error).
+void accept(const IcpSamples& s, const Eigen::Matrix3d& w, const Eigen::Vector3d& d, const IcpOptions& o, IcpResult& r) {
+  r.correction = Eigen::Isometry3d::Identity();
+  r.correction.linear() = w;
+  r.correction.translation() = d;
+  double farthest = 0.0, sum = 0.0;
+  for (std::size_t i = 0; i < s.pts.size(); ++i) {
+    const double m = (w * (s.pts[i] - s.pivots[i]) + s.pivots[i] + d - s.pts[i]).norm();
+    farthest = std::max(farthest, m);
+    sum += m;
+  }
+  r.moved_mean_mm = sum / static_cast<double>(s.pts.size());
+  r.moved_max_mm = farthest;
+  if (farthest > o.max_distance_mm) {
+    r.why = "the correction moves samples " + std::to_string(farthest) + " mm, beyond the pose error bound of " +
+            std::to_string(o.max_distance_mm) + " mm (a slide along a weakly fixed direction; conditioning " +
+            std::to_string(r.conditioning) + ")";
+    return;
+  }
+  r.ok = true;
+  if (r.free_directions) r.why = "ill-conditioned in " + std::to_string(r.free_directions) + " of 6 directions: registered in the others";
+}
+
+}  // namespace
+
+IcpResult register_points(const std::vector<Eigen::Vector3d>& pts_in, const ModelCloud& model, const IcpOptions& o,
+                          const std::vector<Eigen::Vector3d>& pivots_in, const std::vector<Eigen::Vector3d>& normals_in) {
+  IcpResult r;
+  const IcpSamples s = icp_samples(pts_in, pivots_in, normals_in);
+  if (s.pts.size() < 50) {
+    r.why = std::to_string(s.pts.size()) + " samples" + (normals_in.empty() ? "" : " with a surface normal") + ", too few to register";
     return r;
   }
   // The correction so far: rotation w about each point's pivot, then translation d (see the header).
   Eigen::Matrix3d w = Eigen::Matrix3d::Identity();
   Eigen::Vector3d d = Eigen::Vector3d::Zero();
-  auto correction = [&] {
-    Eigen::Isometry3d c = Eigen::Isometry3d::Identity();
-    c.linear() = w;
-    c.translation() = d;
-    return c;
-  };
-  const double cos_max = std::cos(o.max_normal_angle_rad);
-  Eigen::Matrix<double, 6, 6> ata = Eigen::Matrix<double, 6, 6>::Zero(), disp = Eigen::Matrix<double, 6, 6>::Zero();
   for (r.iterations = 1; r.iterations <= o.max_iterations; ++r.iterations) {
-    ata.setZero();
-    disp.setZero();
-    Eigen::Matrix<double, 6, 1> atb = Eigen::Matrix<double, 6, 1>::Zero();
-    std::size_t pairs = 0;
-    double ss = 0.0;
-    std::vector<Eigen::Vector3d> moved(pts.size()), lever(pts.size());
-    for (std::size_t i = 0; i < pts.size(); ++i) {
-      lever[i] = w * (pts[i] - pivots[i]);  // from the moved pivot, pivot + d
-      moved[i] = lever[i] + pivots[i] + d;
+    std::vector<Eigen::Vector3d> moved(s.pts.size()), lever(s.pts.size());
+    for (std::size_t i = 0; i < s.pts.size(); ++i) {
+      lever[i] = w * (s.pts[i] - s.pivots[i]);  // from the moved pivot, pivot + d
+      moved[i] = lever[i] + s.pivots[i] + d;
     }
-    // Neighbours of all samples of this iteration first (the tree is read-only), then the normal equations.
-    for (std::size_t i = 0; i < pts.size(); ++i) {
-      const Eigen::Vector3d& p = moved[i];
-      const long k = model.nearest(p, o.max_distance_mm);
-      if (k < 0) continue;
-      const Eigen::Vector3d& q = model.point(static_cast<std::size_t>(k));
-      const Eigen::Vector3d& n = model.normal(static_cast<std::size_t>(k));
-      const Eigen::Vector3d off = p - q;
-      if (normals[i].squaredNorm() > 0.5) {
-        // The sample's own normal (turned with the correction) must agree with the model's.
-        if ((w * normals[i]).dot(n) < cos_max) continue;
-      } else if (off.norm() > 1e-9 && std::abs(off.normalized().dot(n)) < cos_max && off.norm() > 0.5 * o.max_distance_mm) {
-        continue;  // normal unknown: reject pairs across thin walls by the offset direction
-      }
-      // Point-to-plane, linearised about the current correction: a motion (ω, v) moves the sample by
-      // g = ω × l + v (l its lever from its pivot) and its residual n·(p - q) by n·g; rotations in units of
-      // lever_mm so that the unknowns compare like with like.
-      Eigen::Matrix<double, 3, 6> g;
-      g.leftCols<3>() = -crossmat(lever[i]) / o.lever_mm;
-      g.rightCols<3>().setIdentity();
-      const Eigen::Matrix<double, 6, 1> row = g.transpose() * n;
-      const double res = n.dot(off);
-      ata += row * row.transpose();
-      disp += g.transpose() * g;
-      atb -= row * res;
-      ss += res * res;
-      ++pairs;
-    }
-    r.overlap = static_cast<double>(pairs) / static_cast<double>(pts.size());
+    NormalEquations e = pair_with_model(s, moved, lever, w, model, o);
+    r.overlap = static_cast<double>(e.pairs) / static_cast<double>(s.pts.size());
     if (r.overlap < o.min_overlap) {
       r.why = "too little overlap with the model (" + std::to_string(static_cast<int>(100 * r.overlap)) + " % of the samples)";
       return r;
     }
-    r.rms_mm = std::sqrt(ss / static_cast<double>(pairs));
+    r.rms_mm = std::sqrt(e.ss / static_cast<double>(e.pairs));
     // Which motions does the view's shape fix? For a motion x, x'·ata·x is how much it changes the residuals
     // and x'·disp·x how far it moves the samples: their ratio λ (0..1, the share of the motion across the
     // surface) is near 0 for a slide — along a plane, an edge, round a surface of revolution (thesis 8.2).
     // Judged on the samples' motion, not on the unknowns. A motion that moves no sample at all (a flat face's
     // stripes are lines: turning the camera about them changes nothing) is neither fixed nor a slide; the
     // ridge makes it cost a little, so that it reads as free and the fixed directions carry none of it.
-    disp += Eigen::Matrix<double, 6, 6>::Identity() * (1e-4 * disp.trace() / 6.0);
-    Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> es(ata, disp);
+    e.disp += Mat6::Identity() * (1e-4 * e.disp.trace() / 6.0);
+    Eigen::GeneralizedSelfAdjointEigenSolver<Mat6> es(e.ata, e.disp);
     r.conditioning = es.eigenvalues()(0);
     r.weakest = es.eigenvectors().col(0).normalized();
     if (r.conditioning < o.min_conditioning && !o.partial) {
@@ -296,29 +367,8 @@ IcpResult register_points(const std::vector<Eigen::Vector3d>& pts_in, const Mode
               "; a plane or a surface of revolution slides)";
       return r;
     }
-    // Solve in the eigenbasis (disp-orthonormal: x = Σ v_e (v_e·atb) / λ_e), leaving out the slides.
-    Eigen::Matrix<double, 6, 1> x = Eigen::Matrix<double, 6, 1>::Zero();
-    r.free_directions = 0;
-    for (int e = 0; e < 6; ++e) {
-      const double lambda = es.eigenvalues()(e);
-      if (lambda < o.min_conditioning) {
-        ++r.free_directions;
-        continue;
-      }
-      x += es.eigenvectors().col(e) * (es.eigenvectors().col(e).dot(atb) / lambda);
-    }
-    // Trust region: no sample moves more than half the pairing distance in one step, so that a poorly
-    // fixed direction cannot throw the view off the model before the correspondences catch up.
-    {
-      double most = 0.0;
-      const Eigen::Vector3d om = x.head<3>() / o.lever_mm;
-      for (std::size_t i = 0; i < pts.size(); i += std::max<std::size_t>(1, pts.size() / 200))
-        most = std::max(most, (om.cross(lever[i]) + x.tail<3>()).norm());
-      if (most > 0.5 * o.max_distance_mm) x *= 0.5 * o.max_distance_mm / most;
-      // and the view turns by at most 0.05 rad (3°) a step: the linearisation holds.
-      const double turn = x.head<3>().norm() / o.lever_mm;
-      if (turn > 0.05) x *= 0.05 / turn;
-    }
+    Vec6 x = solve_fixed_directions(es, e.atb, o, r);
+    limit_step(x, lever, o);
     const Eigen::Vector3d omega = x.head<3>() / o.lever_mm, v = x.tail<3>();
     Eigen::Matrix3d step = Eigen::Matrix3d::Identity();
     if (omega.norm() > 0.0) step = Eigen::AngleAxisd(omega.norm(), omega.normalized()).toRotationMatrix();
@@ -327,33 +377,17 @@ IcpResult register_points(const std::vector<Eigen::Vector3d>& pts_in, const Mode
     d += v;
     // The largest motion of any sample under this step.
     double moved_most = 0.0;
-    for (std::size_t i = 0; i < pts.size(); i += std::max<std::size_t>(1, pts.size() / 200))
+    for (std::size_t i = 0; i < s.pts.size(); i += std::max<std::size_t>(1, s.pts.size() / 200))
       moved_most = std::max(moved_most, (step * lever[i] - lever[i] + v).norm());
     if (moved_most < o.converged_mm) {
-      r.correction = correction();
-      // A correction larger than the positioner can err is a slide along a weakly fixed direction (a face
-      // with a sliver of another), not the pose error: refused, not counted.
-      double farthest = 0.0, sum = 0.0;
-      for (std::size_t i = 0; i < pts.size(); ++i) {
-        const double m = (w * (pts[i] - pivots[i]) + pivots[i] + d - pts[i]).norm();
-        farthest = std::max(farthest, m);
-        sum += m;
-      }
-      r.moved_mean_mm = sum / static_cast<double>(pts.size());
-      r.moved_max_mm = farthest;
-      if (farthest > o.max_distance_mm) {
-        r.why = "the correction moves samples " + std::to_string(farthest) + " mm, beyond the pose error bound of " +
-                std::to_string(o.max_distance_mm) + " mm (a slide along a weakly fixed direction; conditioning " +
-                std::to_string(r.conditioning) + ")";
-        return r;
-      }
-      r.ok = true;
-      if (r.free_directions) r.why = "ill-conditioned in " + std::to_string(r.free_directions) + " of 6 directions: registered in the others";
+      accept(s, w, d, o, r);
       return r;
     }
   }
   r.why = "did not converge in " + std::to_string(o.max_iterations) + " iterations";
-  r.correction = correction();
+  r.correction = Eigen::Isometry3d::Identity();
+  r.correction.linear() = w;
+  r.correction.translation() = d;
   return r;
 }
 
