@@ -123,87 +123,121 @@ IkResult look_at(const CellModel& cell, const Eigen::Vector3d& p, double standof
   return inverse_kinematics(cell, object_to_world.inverse() * camera_to_world, scan_length);
 }
 
-IkResult inverse_kinematics(const CellModel& c, const Eigen::Isometry3d& desired, double scan_length_mm,
-                            const JointVector* seed) {
+namespace {
+
+const char* const kLiftTiltAxes[] = {"turntable", "reach", "lift", "tilt", "sweep"};
+
+/// The first of axes 1-4 of a turntable_lift_tilt cell outside its limits, or nothing.
+std::optional<std::string> lift_tilt_out_of_limits(const CellModel& c, const JointVector& q) {
+  for (int k = 1; k < 5; ++k)
+    if (!within(c.axes[k], q[k])) return std::string(kLiftTiltAxes[k]) + " out of its limits";
+  return std::nullopt;
+}
+
+/// A calibrated axis tilted off world Z: the nominal solution polished with Gauss-Newton on the pose error
+/// (positions in mm, rotations in rad on a 1 m lever); five axes cannot follow a baseline the tilt has taken
+/// off the horizontal, so what remains is a rotation of at most the tilt. False when that does not hold.
+bool polish_for_tilted_axis(const CellModel& c, const Eigen::Isometry3d& desired, JointVector& q) {
+  const double tilt = std::acos(std::clamp(c.table_axis_direction.normalized().z(), -1.0, 1.0));
+  auto error = [&](const JointVector& x) {
+    const Eigen::Isometry3d now = forward_kinematics(c, x);
+    Eigen::Matrix<double, 6, 1> e;
+    e.head<3>() = desired.translation() - now.translation();
+    const Eigen::AngleAxisd w(Eigen::Quaterniond(desired.linear() * now.linear().transpose()).normalized());
+    e.tail<3>() = 1000.0 * w.angle() * w.axis();
+    return e;
+  };
+  for (int it = 0; it < 10; ++it) {
+    const Eigen::Matrix<double, 6, 1> e0 = error(q);
+    if (e0.norm() < 1e-10) break;
+    Eigen::Matrix<double, 6, 5> jac;
+    for (int k = 0; k < 5; ++k) {
+      JointVector a = q, b = q;
+      const double h = 1e-6;
+      a[k] += h;
+      b[k] -= h;
+      jac.col(k) = -(error(a) - error(b)) / (2 * h);
+    }
+    const Eigen::Matrix<double, 5, 1> dq = jac.completeOrthogonalDecomposition().solve(e0);
+    for (int k = 0; k < 5; ++k) q[k] += dq[k];
+    if (dq.norm() < 1e-12) break;
+  }
+  const Eigen::Isometry3d got = forward_kinematics(c, q);
+  const double rot = Eigen::AngleAxisd(got.linear().transpose() * desired.linear()).angle();
+  return (got.translation() - desired.translation()).norm() <= 1e-3 && rot <= tilt + 1e-6;
+}
+
+/// turntable_lift_tilt in closed form: the table turns the baseline onto world Y, the tilt follows the
+/// boresight's elevation, reach / lift / sweep the camera's position.
+IkResult ik_lift_tilt(const CellModel& c, const Eigen::Isometry3d& desired, const Eigen::Isometry3d& camera_to_table,
+                      double scan_length_mm, const JointVector& near) {
   IkResult res;
-  const JointVector near = seed && seed->size() == c.axes.size() ? *seed : c.home();
-  const Eigen::Isometry3d camera_to_table = c.object_on_table * desired;
   const Axis& table = c.axes[0];
-  if (c.kinematics == CellKinematics::turntable_lift_tilt) {
-    const Eigen::Vector3d y = camera_to_table.linear().col(1);
-    // A calibrated axis tilted off world Z tilts the table frame: the baseline may then lean by the tilt.
-    const double lean = c.nominal_table_axis() ? kTol : std::sin(std::acos(std::clamp(c.table_axis_direction.z(), -1.0, 1.0))) + 1e-9;
-    if (std::abs(y.z()) > lean) {
-      res.why = "baseline not horizontal (this cell keeps camera y along world Y)";
-      return res;
-    }
-    const auto theta = wrap_into(std::numbers::pi / 2 - std::atan2(y.y(), y.x()), table.min, table.max, near[0]);
-    if (!theta) {
-      res.why = "turntable: angle outside its limits";
-      return res;
-    }
-    const Eigen::Isometry3d camera_to_world = rot_z(*theta) * camera_to_table;
-    const Eigen::Vector3d z = camera_to_world.linear().col(2);
-    const double phi = std::atan2(z.z(), z.x());
-    const Eigen::Vector3d pivot = camera_to_world.translation() - tilt_rotation(phi) * c.camera_offset_mm;
-    JointVector q = {*theta, pivot.x(), pivot.z(), phi, pivot.y()};
-    const char* names[] = {"turntable", "reach", "lift", "tilt", "sweep"};
-    for (int k = 1; k < 5; ++k)
-      if (!within(c.axes[k], q[k])) {
-        res.why = std::string(names[k]) + " out of its limits";
-        return res;
-      }
-    if (!c.nominal_table_axis()) {
-      // A calibrated axis tilted off world Z: polish the nominal solution with Gauss-Newton on the pose error
-      // (positions in mm, rotations in rad on a 1 m lever); five axes cannot follow a baseline the tilt has
-      // taken off the horizontal, so what remains is a rotation of at most the tilt.
-      const double tilt = std::acos(std::clamp(c.table_axis_direction.normalized().z(), -1.0, 1.0));
-      auto error = [&](const JointVector& x) {
-        const Eigen::Isometry3d now = forward_kinematics(c, x);
-        Eigen::Matrix<double, 6, 1> e;
-        e.head<3>() = desired.translation() - now.translation();
-        const Eigen::AngleAxisd w(Eigen::Quaterniond(desired.linear() * now.linear().transpose()).normalized());
-        e.tail<3>() = 1000.0 * w.angle() * w.axis();
-        return e;
-      };
-      for (int it = 0; it < 10; ++it) {
-        const Eigen::Matrix<double, 6, 1> e0 = error(q);
-        if (e0.norm() < 1e-10) break;
-        Eigen::Matrix<double, 6, 5> jac;
-        for (int k = 0; k < 5; ++k) {
-          JointVector a = q, b = q;
-          const double h = 1e-6;
-          a[k] += h;
-          b[k] -= h;
-          jac.col(k) = -(error(a) - error(b)) / (2 * h);
-        }
-        const Eigen::Matrix<double, 5, 1> dq = jac.completeOrthogonalDecomposition().solve(e0);
-        for (int k = 0; k < 5; ++k) q[k] += dq[k];
-        if (dq.norm() < 1e-12) break;
-      }
-      const Eigen::Isometry3d got = forward_kinematics(c, q);
-      const double rot = Eigen::AngleAxisd(got.linear().transpose() * desired.linear()).angle();
-      if ((got.translation() - desired.translation()).norm() > 1e-3 || rot > tilt + 1e-6) {
-        res.why = "not reachable with the calibrated turntable axis";
-        return res;
-      }
-      for (int k = 0; k < 5; ++k)
-        if (!within(c.axes[k], q[k])) {
-          res.why = std::string(names[k]) + " out of its limits";
-          return res;
-        }
-    }
-    const Axis& sweep = c.axes[4];
-    if (q[4] - 0.5 * scan_length_mm < sweep.min - kTol || q[4] + 0.5 * scan_length_mm > sweep.max + kTol) {
-      res.why = "sweep cannot travel the scan length here";
-      return res;
-    }
-    res.ok = true;
-    res.q = q;
+  const Eigen::Vector3d y = camera_to_table.linear().col(1);
+  // A calibrated axis tilted off world Z tilts the table frame: the baseline may then lean by the tilt.
+  const double lean = c.nominal_table_axis() ? kTol : std::sin(std::acos(std::clamp(c.table_axis_direction.z(), -1.0, 1.0))) + 1e-9;
+  if (std::abs(y.z()) > lean) {
+    res.why = "baseline not horizontal (this cell keeps camera y along world Y)";
     return res;
   }
-  // arm_turntable: turn the object so the camera stands on the arm's side, then solve the arm (KDL LMA) from
-  // a few seeds; accept only exact solutions within the joint limits.
+  const auto theta = wrap_into(std::numbers::pi / 2 - std::atan2(y.y(), y.x()), table.min, table.max, near[0]);
+  if (!theta) {
+    res.why = "turntable: angle outside its limits";
+    return res;
+  }
+  const Eigen::Isometry3d camera_to_world = rot_z(*theta) * camera_to_table;
+  const Eigen::Vector3d z = camera_to_world.linear().col(2);
+  const double phi = std::atan2(z.z(), z.x());
+  const Eigen::Vector3d pivot = camera_to_world.translation() - tilt_rotation(phi) * c.camera_offset_mm;
+  JointVector q = {*theta, pivot.x(), pivot.z(), phi, pivot.y()};
+  if (const auto why = lift_tilt_out_of_limits(c, q)) {
+    res.why = *why;
+    return res;
+  }
+  if (!c.nominal_table_axis()) {
+    if (!polish_for_tilted_axis(c, desired, q)) {
+      res.why = "not reachable with the calibrated turntable axis";
+      return res;
+    }
+    if (const auto why = lift_tilt_out_of_limits(c, q)) {
+      res.why = *why;
+      return res;
+    }
+  }
+  const Axis& sweep = c.axes[4];
+  if (q[4] - 0.5 * scan_length_mm < sweep.min - kTol || q[4] + 0.5 * scan_length_mm > sweep.max + kTol) {
+    res.why = "sweep cannot travel the scan length here";
+    return res;
+  }
+  res.ok = true;
+  res.q = q;
+  return res;
+}
+
+/// Newton steps with the exact Jacobian and an exact rotation error (quaternion log map) finish what LMA
+/// started: KDL's own rotation error (via acos) cannot see below ~1e-8 rad, 1e-6 mm at the camera.
+void polish_arm(KDL::ChainFkSolverPos_recursive& fk, KDL::ChainJntToJacSolver& jacobian, const Eigen::Isometry3d& goal, KDL::JntArray& out) {
+  for (int polish = 0; polish < 12; ++polish) {
+    KDL::Frame at;
+    fk.JntToCart(out, at);
+    const Eigen::Isometry3d now = to_eigen(at);
+    if (pose_error(now, goal) < 1e-12) break;
+    Eigen::Matrix<double, 6, 1> err;
+    err.head<3>() = goal.translation() - now.translation();
+    const Eigen::AngleAxisd w(Eigen::Quaterniond(goal.linear() * now.linear().transpose()).normalized());
+    err.tail<3>() = w.angle() * w.axis();
+    KDL::Jacobian jac(6);
+    jacobian.JntToJac(out, jac);
+    const Eigen::Matrix<double, 6, 1> dq = jac.data.completeOrthogonalDecomposition().solve(err);
+    for (int k = 0; k < 6; ++k) out(k) += dq[k];
+  }
+}
+
+/// arm_turntable: turn the object so the camera stands on the arm's side, then solve the arm (KDL LMA) from a
+/// few seeds; accept only exact solutions within the joint limits.
+IkResult ik_arm(const CellModel& c, const Eigen::Isometry3d& desired, const Eigen::Isometry3d& camera_to_table, const JointVector& near) {
+  IkResult res;
+  const Axis& table = c.axes[0];
   const KDL::Chain chain = arm_chain(c);
   // LMA's own verdict is not the test (it reports "increment too small" at a converged pose); the FK error is.
   // Weights: positions in mm, rotations in rad scaled by a 1 m lever, so both converge to 1e-9 at the camera.
@@ -233,25 +267,9 @@ IkResult inverse_kinematics(const CellModel& c, const Eigen::Isometry3d& desired
     for (const auto& s : seeds) {
       KDL::JntArray out(6);
       ik.CartToJnt(s, target, out);
-      // LMA can stall at ~1e-5 far from its seed; restarting it from where it stopped converges (quadratically
+      // LMA can stall at ~1e-5 far from its seed; polishing from where it stopped converges (quadratically
       // close to the solution).
-      // Newton steps with the exact Jacobian and an exact rotation error (quaternion log map) finish what LMA
-      // started: KDL's own rotation error (via acos) cannot see below ~1e-8 rad, 1e-6 mm at the camera.
-      const Eigen::Isometry3d goal = to_eigen(target);
-      for (int polish = 0; polish < 12; ++polish) {
-        KDL::Frame at;
-        fk.JntToCart(out, at);
-        const Eigen::Isometry3d now = to_eigen(at);
-        if (pose_error(now, goal) < 1e-12) break;
-        Eigen::Matrix<double, 6, 1> err;
-        err.head<3>() = goal.translation() - now.translation();
-        const Eigen::AngleAxisd w(Eigen::Quaterniond(goal.linear() * now.linear().transpose()).normalized());
-        err.tail<3>() = w.angle() * w.axis();
-        KDL::Jacobian jac(6);
-        jacobian.JntToJac(out, jac);
-        const Eigen::Matrix<double, 6, 1> dq = jac.data.completeOrthogonalDecomposition().solve(err);
-        for (int k = 0; k < 6; ++k) out(k) += dq[k];
-      }
+      polish_arm(fk, jacobian, to_eigen(target), out);
       JointVector q(7);
       q[0] = *theta;
       bool ok = true;
@@ -269,6 +287,16 @@ IkResult inverse_kinematics(const CellModel& c, const Eigen::Isometry3d& desired
   }
   res.why = "arm: no solution within the joint limits";
   return res;
+}
+
+}  // namespace
+
+IkResult inverse_kinematics(const CellModel& c, const Eigen::Isometry3d& desired, double scan_length_mm,
+                            const JointVector* seed) {
+  const JointVector near = seed && seed->size() == c.axes.size() ? *seed : c.home();
+  const Eigen::Isometry3d camera_to_table = c.object_on_table * desired;
+  if (c.kinematics == CellKinematics::turntable_lift_tilt) return ik_lift_tilt(c, desired, camera_to_table, scan_length_mm, near);
+  return ik_arm(c, desired, camera_to_table, near);
 }
 
 std::optional<Eigen::Isometry3d> nearest_reachable(const CellModel& c, const Eigen::Isometry3d& desired,
