@@ -22,6 +22,7 @@
 #include "planner/geometry/mesh.hpp"
 #include "planner/core/rough_model.hpp"
 #include "planner/reconstruction/rough_scan.hpp"
+#include "planner/sim/synthetic.hpp"
 #include "planner/sim/virtual_scanner.hpp"
 
 namespace scancell::daemon {
@@ -800,6 +801,38 @@ TEST_F(SimCell, TwoSetupsTurnThePartOverAlignItAndMeasureWhatRestedOnThePlate) {
   // And against the truth: setup 1 ended lower, by what rested on the plate.
   ASSERT_TRUE(result["setups"][0].contains("verified_mv_at_end")) << result["setups"].dump();
   EXPECT_LT(result["setups"][0]["verified_mv_at_end"].get<double>(), result["verified_mv"].get<double>() - 0.02);
+}
+
+TEST_F(SimCell, ASetupThatCannotBeAlignedIsRefusedAndTheFirstSetupsProductKept) {
+  // A tube looks the same turned about its axis: stood on its other end, the exploration cannot tell how the
+  // operator turned it, so nothing of the new setup may be merged. The job stalls naming why and hands over
+  // what setup 1 measured.
+  const fs::path tube = dir / "tube.off";
+  sp::write_off(sp::cylinder_with_bore(60, 30, 50, 3.0), tube.string());
+  JobRequest r;
+  r.mesh = tube.string();
+  r.rough_vertices = 400;
+  r.setups = 2;
+  validate_request(r);
+  const auto job = journal->create_job("tube", r.to_json().dump());
+  max_rounds = 1;
+  next_setup_min_area_mm2 = 100.0;
+  sim_placement_error_mm = 5.0;
+  sim_placement_error_rad = 0.3;
+  std::atomic<int> stop{0};
+  ASSERT_EQ(runner().run(job, stop), JobState::awaiting_operator) << journal->job(job).cause;
+  const double after_setup1 = nlohmann::json::parse(journal->job(job).result_json)["measured_coverage"].get<double>();
+  journal->set_state(job, JobState::queued, "continued");
+  EXPECT_EQ(runner().run(job, stop), JobState::stalled);
+  const JobRecord rec = journal->job(job);
+  EXPECT_THAT(rec.cause, HasSubstr("setup 2: the part as put down could not be aligned to the model so far, so nothing of it was merged"));
+  const auto result = nlohmann::json::parse(rec.result_json);
+  std::cout << "tube, setup 2: " << rec.cause << "\n";
+  EXPECT_DOUBLE_EQ(result["measured_coverage"].get<double>(), after_setup1);  // nothing of setup 2 counted
+  ASSERT_TRUE(result.contains("cloud")) << result.dump();
+  EXPECT_TRUE(fs::exists(result["cloud"].get<std::string>()));
+  ASSERT_EQ(result["setups"].size(), 2u);
+  EXPECT_EQ(result["setups"][1]["views"].get<int>(), 0);
 }
 
 TEST(JobRequest, BadInputIsRefusedNamingTheFile) {
