@@ -183,6 +183,127 @@ std::vector<std::uint32_t> MeasurabilityMatrix::unmeasurable_rows() const {
   return out;
 }
 
+namespace {
+
+/// The two test levels of one build (see build_measurability) and how many rays a pair casts at each.
+struct Levels {
+  TestLevel tight, wide;
+  bool same_test;         // no plain matrix: the wide level is the tight one with its undisplaced rays only
+  bool tight_extra_rays;  // the tight level's near-miss rays, cast only for pairs the wide level's leave clear
+  std::size_t wide_rays;
+};
+
+/// One worker's share of the matrix: for each candidate, the rows in its frustum tested at both levels, their
+/// occlusion rays cast in streams of kPairsPerFlush pairs, and its column (and plain column) collected.
+class ColumnWorker {
+ public:
+  ColumnWorker(const RoughModel& rough, const OcclusionScene& scene, const std::vector<Block>& blocks, const Levels& lv, double eps,
+               bool plain)
+      : rough_(rough), scene_(scene), blocks_(blocks), lv_(lv), eps_(eps), plain_(plain),
+        occ_(lv.wide_rays * kPairsPerFlush), extra_occ_(8 * kPairsPerFlush) {
+    pending_.reserve(kPairsPerFlush);
+    rays_.reserve(lv.wide_rays * kPairsPerFlush);
+    extra_rays_.reserve(8 * kPairsPerFlush);
+  }
+
+  /// Candidate v's column (rows ascending) and, with a plain matrix, its plain column; counted into `cnt`.
+  void build(const Viewpoint& v, std::vector<std::uint32_t>& column, std::vector<std::uint32_t>& plain_column, Counters& cnt) {
+    const Eigen::Matrix3d r = v.rotation();
+    const Eigen::Matrix3d rt = r.transpose();
+    const auto n_rows = static_cast<std::uint32_t>(rough_.size());
+    std::uint64_t culled = 0, in_frustum = 0, surviving = 0, compliant = 0;
+    column.clear();
+    plain_column.clear();
+    for (std::uint32_t b = 0; b < blocks_.size(); ++b) {
+      const std::uint32_t begin = b * kBlock, end = std::min<std::uint32_t>(begin + kBlock, n_rows);
+      if (!sphere_may_touch_frustum(lv_.wide.sensor, lv_.wide.terms, v.scan_length_mm * lv_.wide.length_factor,
+                                    rt * (blocks_[b].centre - v.position), blocks_[b].radius)) {
+        culled += end - begin;
+        continue;
+      }
+      for (std::uint32_t i = begin; i < end; ++i) {
+        const Eigen::Vector3d pc = rt * (rough_.points[i] - v.position);
+        const Eigen::Vector3d nc = rt * rough_.normals[i];
+        const PointTest t = lv_.tight.test(v.scan_length_mm, pc, nc);
+        in_frustum += t.in_frustum;
+        surviving += t.facing;
+        compliant += t.compliant;
+        if (!t.compliant && (lv_.same_test || !lv_.wide.test(v.scan_length_mm, pc, nc).compliant)) continue;
+        pending_.push_back({i, t.compliant, t});
+        rays_.resize(rays_.size() + lv_.wide_rays);
+        OcclusionRay* out = &rays_[rays_.size() - lv_.wide_rays];
+        out += pair_rays(rough_.points[i], rough_.normals[i], v, r, t, eps_, 0.0, out);
+        if (lv_.wide.margin_mm > 0.0) pair_rays(rough_.points[i], rough_.normals[i], v, r, t, eps_, lv_.wide.margin_mm, out);
+        if (pending_.size() == kPairsPerFlush) flush(v, r, column, plain_column);
+      }
+    }
+    flush(v, r, column, plain_column);
+    if (plain_) std::sort(plain_column.begin(), plain_column.end());  // rows the near-miss rays failed joined late
+    cnt.block_culled += culled;
+    cnt.in_frustum += in_frustum;
+    cnt.surviving += surviving;
+    cnt.compliant += compliant;
+    cnt.measurable += column.size();
+  }
+
+  std::uint64_t rays_cast = 0;
+
+ private:
+  struct Pending {
+    std::uint32_t row;
+    bool tight;  // the tight test is compliant too
+    PointTest test;
+  };
+
+  /// Casts the pending pairs' rays; pairs the wide level's rays leave clear are plain elements, and tight
+  /// elements once the tight level's near-miss rays (when it has its own) are clear too.
+  void flush(const Viewpoint& v, const Eigen::Matrix3d& r, std::vector<std::uint32_t>& column, std::vector<std::uint32_t>& plain_column) {
+    if (pending_.empty()) return;
+    scene_.occluded(rays_.data(), rays_.size(), occ_.data());
+    rays_cast += rays_.size();
+    extra_rays_.clear();
+    extra_rows_.clear();
+    for (std::size_t p = 0; p < pending_.size(); ++p) {
+      if (!all_clear(&occ_[lv_.wide_rays * p], lv_.wide_rays)) continue;
+      const Pending& e = pending_[p];
+      if (plain_ && !e.tight) plain_column.push_back(e.row);
+      if (!e.tight) continue;
+      if (!lv_.tight_extra_rays) {
+        column.push_back(e.row);
+        continue;
+      }
+      extra_rows_.push_back(e.row);
+      extra_rays_.resize(extra_rays_.size() + 8);
+      pair_rays(rough_.points[e.row], rough_.normals[e.row], v, r, e.test, eps_, lv_.tight.margin_mm, &extra_rays_[extra_rays_.size() - 8]);
+    }
+    if (!extra_rows_.empty()) {
+      scene_.occluded(extra_rays_.data(), extra_rays_.size(), extra_occ_.data());
+      rays_cast += extra_rays_.size();
+      for (std::size_t p = 0; p < extra_rows_.size(); ++p) {
+        if (all_clear(&extra_occ_[8 * p], 8))
+          column.push_back(extra_rows_[p]);
+        else if (plain_)
+          plain_column.push_back(extra_rows_[p]);
+      }
+    }
+    pending_.clear();
+    rays_.clear();
+  }
+
+  const RoughModel& rough_;
+  const OcclusionScene& scene_;
+  const std::vector<Block>& blocks_;
+  const Levels& lv_;
+  const double eps_;
+  const bool plain_;
+  std::vector<Pending> pending_;
+  std::vector<OcclusionRay> rays_, extra_rays_;
+  std::vector<std::uint8_t> occ_, extra_occ_;
+  std::vector<std::uint32_t> extra_rows_;
+};
+
+}  // namespace
+
 MeasurabilityMatrix build_measurability(const RoughModel& rough, const OcclusionScene& scene, const SensorModel& sensor,
                                         const ModelSpec& spec, const std::vector<Viewpoint>& candidates,
                                         const MatrixSettings& settings, MatrixStats* stats, const std::atomic<int>* cancel,
@@ -196,12 +317,10 @@ MeasurabilityMatrix build_measurability(const RoughModel& rough, const Occlusion
   // also wants, or (without) the tight one with its undisplaced rays only. Every level's countermeasures are
   // at least the wide one's, so a tight element is always a wide one: blocks are culled and rays cast at the
   // wide level first, and the near-miss rays (4x as many) only for the pairs the undisplaced rays leave clear.
-  const TestLevel tight(sensor, spec, settings.countermeasures);
   Countermeasures wide_cm = plain ? plain->countermeasures : settings.countermeasures;
   if (!plain) wide_cm.visibility_margin_mm = 0.0;
-  const TestLevel wide(sensor, spec, wide_cm);
-  const bool same_test = !plain;
-  const bool tight_extra_rays = tight.margin_mm > 0.0 && tight.margin_mm != wide.margin_mm;
+  const TestLevel tight(sensor, spec, settings.countermeasures), wide(sensor, spec, wide_cm);
+  const Levels lv{tight, wide, !plain, tight.margin_mm > 0.0 && tight.margin_mm != wide.margin_mm, wide.margin_mm > 0.0 ? 10u : 2u};
   if (plain) {
     const Countermeasures& t = settings.countermeasures;
     if (wide_cm.frustum_detune > t.frustum_detune || wide_cm.dof_margin_mm > t.dof_margin_mm ||
@@ -211,100 +330,17 @@ MeasurabilityMatrix build_measurability(const RoughModel& rough, const Occlusion
     plain->matrix.n_rows = m.n_rows;
     plain->matrix.columns.resize(candidates.size());
   }
-  const std::size_t wide_rays = wide.margin_mm > 0.0 ? 10 : 2;
   Counters cnt;
-
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, candidates.size(), 4), [&](const auto& range) {
-    struct Pending {
-      std::uint32_t row;
-      bool tight;  // the tight test is compliant too
-      PointTest test;
-    };
-    std::vector<Pending> pending;
-    std::vector<OcclusionRay> rays, extra_rays;
-    std::vector<std::uint8_t> occ(wide_rays * kPairsPerFlush), extra_occ(8 * kPairsPerFlush);
-    std::vector<std::uint32_t> column, plain_column, extra_rows;
-    pending.reserve(kPairsPerFlush);
-    rays.reserve(wide_rays * kPairsPerFlush);
-    extra_rays.reserve(8 * kPairsPerFlush);
-    std::uint64_t rays_cast = 0;
+    ColumnWorker worker(rough, scene, blocks, lv, eps, plain != nullptr);
+    std::vector<std::uint32_t> column, plain_column;
     for (std::size_t j = range.begin(); j != range.end(); ++j) {
       if (cancel && cancel->load(std::memory_order_relaxed) != 0) return;  // the caller stops planning
-      const Viewpoint& v = candidates[j];
-      const Eigen::Matrix3d r = v.rotation();
-      const Eigen::Matrix3d rt = r.transpose();
-      std::uint64_t culled = 0, in_frustum = 0, surviving = 0, compliant = 0;
-      column.clear();
-      plain_column.clear();
-      auto flush = [&] {
-        if (pending.empty()) return;
-        scene.occluded(rays.data(), rays.size(), occ.data());
-        rays_cast += rays.size();
-        extra_rays.clear();
-        extra_rows.clear();
-        for (std::size_t p = 0; p < pending.size(); ++p) {
-          if (!all_clear(&occ[wide_rays * p], wide_rays)) continue;
-          const Pending& e = pending[p];
-          if (plain && !e.tight) plain_column.push_back(e.row);
-          if (!e.tight) continue;
-          if (!tight_extra_rays) {
-            column.push_back(e.row);
-            continue;
-          }
-          extra_rows.push_back(e.row);
-          extra_rays.resize(extra_rays.size() + 8);
-          pair_rays(rough.points[e.row], rough.normals[e.row], v, r, e.test, eps, tight.margin_mm,
-                    &extra_rays[extra_rays.size() - 8]);
-        }
-        if (!extra_rows.empty()) {
-          scene.occluded(extra_rays.data(), extra_rays.size(), extra_occ.data());
-          rays_cast += extra_rays.size();
-          for (std::size_t p = 0; p < extra_rows.size(); ++p) {
-            if (all_clear(&extra_occ[8 * p], 8))
-              column.push_back(extra_rows[p]);
-            else if (plain)
-              plain_column.push_back(extra_rows[p]);
-          }
-        }
-        pending.clear();
-        rays.clear();
-      };
-      for (std::uint32_t b = 0; b < blocks.size(); ++b) {
-        const std::uint32_t begin = b * kBlock, end = std::min<std::uint32_t>(begin + kBlock, m.n_rows);
-        if (!sphere_may_touch_frustum(wide.sensor, wide.terms, v.scan_length_mm * wide.length_factor,
-                                      rt * (blocks[b].centre - v.position), blocks[b].radius)) {
-          culled += end - begin;
-          continue;
-        }
-        for (std::uint32_t i = begin; i < end; ++i) {
-          const Eigen::Vector3d pc = rt * (rough.points[i] - v.position);
-          const Eigen::Vector3d nc = rt * rough.normals[i];
-          const PointTest t = tight.test(v.scan_length_mm, pc, nc);
-          in_frustum += t.in_frustum;
-          surviving += t.facing;
-          compliant += t.compliant;
-          if (!t.compliant && (same_test || !wide.test(v.scan_length_mm, pc, nc).compliant)) continue;
-          pending.push_back({i, t.compliant, t});
-          rays.resize(rays.size() + wide_rays);
-          OcclusionRay* out = &rays[rays.size() - wide_rays];
-          out += pair_rays(rough.points[i], rough.normals[i], v, r, t, eps, 0.0, out);
-          if (wide.margin_mm > 0.0) pair_rays(rough.points[i], rough.normals[i], v, r, t, eps, wide.margin_mm, out);
-          if (pending.size() == kPairsPerFlush) flush();
-        }
-      }
-      flush();
+      worker.build(candidates[j], column, plain_column, cnt);
       m.columns[j] = MeasurabilityColumn(column, m.n_rows);
-      if (plain) {  // (rows the near-miss rays failed joined after those of their flush: order them)
-        std::sort(plain_column.begin(), plain_column.end());
-        plain->matrix.columns[j] = MeasurabilityColumn(plain_column, m.n_rows);
-      }
-      cnt.block_culled += culled;
-      cnt.in_frustum += in_frustum;
-      cnt.surviving += surviving;
-      cnt.compliant += compliant;
-      cnt.measurable += column.size();
+      if (plain) plain->matrix.columns[j] = MeasurabilityColumn(plain_column, m.n_rows);
     }
-    cnt.rays += rays_cast;
+    cnt.rays += worker.rays_cast;
   });
   if (cancel && cancel->load() != 0)
     throw PlanCancelled("planning stopped by request while building the measurability matrix (" + std::to_string(candidates.size()) +
