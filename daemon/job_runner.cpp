@@ -503,18 +503,8 @@ std::optional<JobState> JobRunner::plan_first_round(Job& j, const std::atomic<in
   j.rough = p.rough;
   j.unmeasurable = p.cover.unmeasurable_rows;
   const std::vector<std::string> poses = view_records(p);
-  const double est = p.cover.cumulative_fraction.empty() ? 0.0 : p.cover.cumulative_fraction.back();
-  json info = {{"round", 0},
-               {"rows", p.rough.size()},
-               {"object_on_table", row_major_json(p.cell->object_on_table.matrix())},
-               {"estimated", est},
-               {"unmeasurable_rows", j.unmeasurable},
-               {"candidates", p.candidates},
-               {"views", p.views.size()},
-               {"predicted_rows", p.predicted_rows},
-               {"view_rows", p.view_rows},
-               {"predicted_gain_mm2", p.predicted_gain_mm2},
-               {"plan_s", p.times.total_s()}};
+  json info = round_info(j, p, 0, 1, std::vector<std::uint8_t>(p.rough.size(), 0));
+  info["unmeasurable_rows"] = j.unmeasurable;
   if (p.placement) {
     info["placement"] = sp::placement_to_json(*p.placement);
     journal_.event(j.id, "placement: " + p.placement->reason);
@@ -649,6 +639,27 @@ json JobRunner::execute_round(Job& j, const std::vector<std::int64_t>& plans, co
 /// After a round: its predicted and realized gain and the rows it failed, then the end (done, or stalled:
 /// every open row given up, max_rounds, nothing new measured, a replan with no view or too little gain per
 /// view) or the next round's plan, journalled. Returns the end state, or nothing to run the next round.
+/// A further round's plan info: what it plans (views, rows, predicted gain) for the rows `measured` leaves
+/// open, its estimate for the whole model, and where the part rests; what a resume and the result read.
+json JobRunner::round_info(const Job& j, const sp::ViewPlan& p, int round, int setup, const std::vector<std::uint8_t>& measured) const {
+  const double est_rest = p.cover.cumulative_fraction.empty() ? 0.0 : p.cover.cumulative_fraction.back();
+  double rest_area = 0.0;
+  for (std::size_t r = 0; r < measured.size(); ++r) rest_area += measured[r] ? 0.0 : j.rough->area_mm2[r];
+  return {{"round", round},
+          {"setup", setup},
+          {"object_on_table", row_major_json(p.cell->object_on_table.matrix())},
+          {"rows", j.rough->size()},
+          {"estimated", est_rest},
+          {"estimated_total", j.progress.measured + est_rest * rest_area / j.rough->total_area_mm2},
+          {"measured_before", j.progress.measured},
+          {"candidates", p.candidates},
+          {"views", p.views.size()},
+          {"predicted_rows", p.predicted_rows},
+          {"view_rows", p.view_rows},
+          {"predicted_gain_mm2", p.predicted_gain_mm2},
+          {"plan_s", p.times.total_s()}};
+}
+
 /// A round's account in the journal: its predicted and realized gain, and the rows excused by lost profiles.
 void JobRunner::journal_round(Job& j, std::int64_t plan, const json& info, const std::vector<json>& infos) {
   const json g = round_gains(infos, j.progress.measured, j.rough->total_area_mm2).back();
@@ -722,7 +733,6 @@ std::optional<JobState> JobRunner::close_or_replan(Job& j, std::int64_t plan, co
 std::optional<JobState> JobRunner::replan(Job& j, const std::vector<std::uint8_t>& measured_now, const std::vector<std::uint8_t>& fails,
                                           const std::vector<std::uint8_t>& retired, std::size_t n_retired, std::size_t open,
                                           const std::string& summary, const std::atomic<int>& stop) {
-  const double total = j.rough->total_area_mm2;
   transition(j, JobState::replanning, std::to_string(open) + " rows left");
   sp::PlannerSettings replan = j.settings;
   // Later rounds go after the leftovers only; their views register to the model through the rows they
@@ -757,25 +767,9 @@ std::optional<JobState> JobRunner::replan(Job& j, const std::vector<std::uint8_t
                                      std::to_string(p.views.size()) + " views), under jobs.min_gain_per_view_mm2 " +
                                      fmt(settings_.min_gain_per_view_mm2, 1) + ": " + summary);
   }
-  const std::vector<std::string> poses = view_records(p);
-  const double est_rest = p.cover.cumulative_fraction.empty() ? 0.0 : p.cover.cumulative_fraction.back();
-  double rest_area = 0.0;
-  for (std::size_t r = 0; r < measured.size(); ++r) rest_area += measured[r] ? 0.0 : j.rough->area_mm2[r];
-  const json rinfo = {{"round", j.round + 1},
-                      {"setup", j.setup},
-                      {"object_on_table", row_major_json(p.cell->object_on_table.matrix())},
-                      {"rows", j.rough->size()},
-                      {"estimated", est_rest},
-                      {"estimated_total", j.progress.measured + est_rest * rest_area / total},
-                      {"measured_before", j.progress.measured},
-                      {"candidates", p.candidates},
-                      {"views", p.views.size()},
-                      {"predicted_rows", p.predicted_rows},
-                      {"view_rows", p.view_rows},
-                      {"predicted_gain_mm2", p.predicted_gain_mm2},
-                      {"retired_rows", n_retired},
-                      {"plan_s", p.times.total_s()}};
-  journal_.add_plan(j.id, j.round + 1, poses, rinfo.dump());
+  json rinfo = round_info(j, p, j.round + 1, j.setup, measured);
+  rinfo["retired_rows"] = n_retired;
+  journal_.add_plan(j.id, j.round + 1, view_records(p), rinfo.dump());
   return std::nullopt;
 }
 
@@ -1051,31 +1045,16 @@ std::optional<JobState> JobRunner::plan_setup(Job& j, int setup, const json& exp
     finish(j, JobState::stalled, name + ": no view of the part in this pose measures what is left");
     return JobState::stalled;
   }
-  double rest_area = 0.0;
-  for (std::size_t r = 0; r < measured.size(); ++r) rest_area += measured[r] ? 0.0 : j.rough->area_mm2[r];
-  const double est_rest = p.cover.cumulative_fraction.empty() ? 0.0 : p.cover.cumulative_fraction.back();
   int rounds = 0;
   for (const auto& [pl, round] : journal_.plan_rounds(j.id)) rounds += round >= 0;
   // Unmeasurable from here on: what no view of the part in this pose measures and no setup before did.
   std::vector<std::uint32_t> unmeasurable;
   for (auto r : p.cover.unmeasurable_rows)
     if (!measured[r]) unmeasurable.push_back(r);
-  const json rinfo = {{"round", rounds},
-                      {"setup", setup},
-                      {"object_on_table", row_major_json(p.cell->object_on_table.matrix())},
-                      {"asked_object_to_table", exploration_info.at("asked_object_to_table")},
-                      {"alignment", alignment},
-                      {"rows", j.rough->size()},
-                      {"unmeasurable_rows", unmeasurable},
-                      {"estimated", est_rest},
-                      {"estimated_total", j.progress.measured + est_rest * rest_area / j.rough->total_area_mm2},
-                      {"measured_before", j.progress.measured},
-                      {"candidates", p.candidates},
-                      {"views", p.views.size()},
-                      {"predicted_rows", p.predicted_rows},
-                      {"view_rows", p.view_rows},
-                      {"predicted_gain_mm2", p.predicted_gain_mm2},
-                      {"plan_s", p.times.total_s()}};
+  json rinfo = round_info(j, p, rounds, setup, measured);
+  rinfo["asked_object_to_table"] = exploration_info.at("asked_object_to_table");
+  rinfo["alignment"] = alignment;
+  rinfo["unmeasurable_rows"] = unmeasurable;
   journal_.add_plan(j.id, rounds, view_records(p), rinfo.dump());
   return std::nullopt;
 }

@@ -129,6 +129,7 @@ class JobRunner {
   nlohmann::json execute_round(Job& j, const std::vector<std::int64_t>& plans, const std::atomic<int>& stop);
   std::optional<JobState> close_or_replan(Job& j, std::int64_t plan, const nlohmann::json& info, const std::atomic<int>& stop);
   void journal_round(Job& j, std::int64_t plan, const nlohmann::json& info, const std::vector<nlohmann::json>& infos);
+  nlohmann::json round_info(const Job& j, const planner::ViewPlan& p, int round, int setup, const std::vector<std::uint8_t>& measured) const;
   std::optional<JobState> replan(Job& j, const std::vector<std::uint8_t>& measured_now, const std::vector<std::uint8_t>& fails,
                                  const std::vector<std::uint8_t>& retired, std::size_t n_retired, std::size_t open,
                                  const std::string& summary, const std::atomic<int>& stop);
