@@ -154,26 +154,18 @@ double design_scan_length_mm(const SensorModel& sensor, const ModelSpec& spec, d
   return std::clamp(length, sensor.scan_length_min_mm, sensor.scan_length_max_mm);
 }
 
-std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const OcclusionScene& scene,
-                                           const SensorModel& sensor, const ModelSpec& spec,
-                                           const ViewpointSettings& st, GenerationReport* report) {
-  if (st.twist_levels < 1) throw ConfigError("viewpoints.twist_levels must be >= 1");
-  if (st.position_decimation < 1) throw ConfigError("viewpoints.position_decimation must be >= 1");
-  GenerationReport rep;
+namespace {
 
-  // Viewpoint positions: RM_v, a d_v-times sparser subset of the rough-model rows (DECOUPLED), or every row
-  // (VARIABLE). The thesis decimates RM_s again; quadric decimation leaves flat regions arbitrarily sampled
-  // (it may strip a plate's corners of every nearby position), so we take a farthest-point sample instead,
-  // in position and normal together: it spreads positions evenly, keeps extremities, samples curved regions
-  // more densely, and never lets the two sides of a thin wall share one position.
+/// Viewpoint positions: RM_v, a d_v-times sparser subset of the rough-model rows (DECOUPLED), or every row
+/// (VARIABLE), sorted. The thesis decimates RM_s again; quadric decimation leaves flat regions arbitrarily
+/// sampled (it may strip a plate's corners of every nearby position), so we take a farthest-point sample
+/// instead, in position and normal together: it spreads positions evenly, keeps extremities, samples curved
+/// regions more densely, and never lets the two sides of a thin wall share one position.
+std::vector<std::uint32_t> viewpoint_positions(const RoughModel& rough, const ViewpointSettings& st, double footprint_half_x,
+                                               GenerationReport& rep) {
   const bool decoupled = st.scheme == ViewpointScheme::decoupled;
-  const int d_t = decoupled ? st.twist_levels : 1;
   const std::size_t by_decimation =
       decoupled ? std::max<std::size_t>(1, rough.size() / static_cast<std::size_t>(st.position_decimation)) : rough.size();
-  // The footprint's half width at R_o: the position spacing's scale, the farthest-point sample's weight on
-  // normals, and the local patch's radius below.
-  const double r_o = sensor.optimal_standoff_mm;
-  const double footprint_half_x = r_o * std::tan(0.5 * sensor.fov_x_rad);
   std::size_t n_positions = by_decimation;
   if (decoupled && st.min_position_spacing_fraction > 0.0) {
     // The footprint, not the mesh, sets how finely positions need to be sampled: positions a few percent of
@@ -185,98 +177,122 @@ std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const Occlus
   rep.positions_by_decimation = by_decimation;
   std::vector<std::uint32_t> target_rows = farthest_point_sample(rough, n_positions, footprint_half_x);
   std::sort(target_rows.begin(), target_rows.end());  // candidate order follows the rows, not the sampling order
-  std::vector<Eigen::Vector3d> target_normals;
-  for (auto r : target_rows) target_normals.push_back(rough.normals[r]);
   rep.positions = target_rows.size();
+  return target_rows;
+}
 
-  const double range_cap = std::min(sensor.range_max_mm, max_range_for_precision_mm(sensor, spec));
-  const double base_scan = design_scan_length_mm(sensor, spec, r_o * st.standoff_factor, st.scan_length_design_incidence_rad);
-  const double half_y = sensor.kind == SensorKind::line_scan ? 0.5 * base_scan : r_o * std::tan(0.5 * sensor.fov_y_rad);
-  const double patch_radius = std::hypot(footprint_half_x, half_y);
+/// The local patch at row point s with normal n: rough points within the footprint cylinder around the normal
+/// that face the same side. Its rise towards the camera sets R_a; its plane sets the VARIABLE twist.
+Patch local_patch(const RoughModel& rough, const Eigen::Vector3d& s, const Eigen::Vector3d& n, double patch_radius) {
+  Patch patch;
+  auto inside = [&](std::size_t i, double& h) {
+    const Eigen::Vector3d d = rough.points[i] - s;
+    h = d.dot(n);
+    return std::abs(h) <= patch_radius && (d - h * n).squaredNorm() <= patch_radius * patch_radius && rough.normals[i].dot(n) > 0.0;
+  };
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  double wsum = 0.0, h = 0.0;
+  for (std::size_t i = 0; i < rough.size(); ++i) {
+    if (!inside(i, h)) continue;
+    patch.rise_mm = std::max(patch.rise_mm, h);
+    const double w = rough.area_mm2[i];
+    centroid += w * rough.points[i];
+    wsum += w;
+  }
+  if (wsum > 0.0) {
+    centroid /= wsum;
+    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+    for (std::size_t i = 0; i < rough.size(); ++i) {
+      if (!inside(i, h)) continue;
+      const Eigen::Vector3d c = rough.points[i] - centroid;
+      cov += rough.area_mm2[i] * c * c.transpose();
+    }
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
+    patch.plane_normal = es.eigenvectors().col(0);
+    if (patch.plane_normal.dot(n) < 0.0) patch.plane_normal = -patch.plane_normal;
+  }
+  return patch;
+}
+
+/// Collision avoidance zone: the camera must stand outside the object and clear of it. 0 clear, 2 inside
+/// (the ray out leaves through a surface), 3 too close.
+std::uint8_t obstruction(const RoughModel& rough, const OcclusionScene& scene, double clearance_mm, const Eigen::Vector3d& pos,
+                         const Eigen::Vector3d& out_dir) {
+  if (!keeps_clearance(rough, pos, clearance_mm)) return 3;
+  if (auto hit = scene.first_hit(pos, out_dir, 0.0, 1e7); hit && hit->triangle < rough.triangles.size()) {
+    // (Triangles past the rough model's are cell fixtures: leaving through one says nothing of the object.)
+    const Triangle& t = rough.triangles[hit->triangle];
+    const Eigen::Vector3d fn = (rough.points[t[1]] - rough.points[t[0]]).cross(rough.points[t[2]] - rough.points[t[0]]);
+    if (fn.dot(out_dir) > 0.0) return 2;  // leaving through a surface: we were inside
+  }
+  return 0;
+}
+
+/// What every position's candidates share: the sensor's footprint at R_o, the range cap, the scan length.
+struct PositionFrame {
+  double r_o, footprint_half_x, range_cap, patch_radius;
+  int d_t;
+};
+
+/// The candidates at row `row` (DECOUPLED: its twist levels, each with its bisector twin where clear), or the
+/// reason there are none (1 no normal, 2 inside, 3 clearance).
+std::uint8_t views_at(const RoughModel& rough, const OcclusionScene& scene, const SensorModel& sensor, const ModelSpec& spec,
+                      const ViewpointSettings& st, const PositionFrame& f, std::uint32_t row, std::vector<Viewpoint>& out) {
+  const Eigen::Vector3d s = rough.points[row];
+  const Eigen::Vector3d n = rough.normals[row];
+  if (n.squaredNorm() < 0.5) return 1;
+  const Patch patch = local_patch(rough, s, n, f.patch_radius);
+  const double r_a = std::min(patch.rise_mm, st.standoff_adjust_max_mm);
+  const double standoff = std::min((f.r_o + r_a) * st.standoff_factor, f.range_cap);
+  const Eigen::Vector3d position = s + standoff * n;
+  if (const std::uint8_t o = obstruction(rough, scene, st.clearance_mm, position, n)) return o;
+  const double scan = design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad);
+  // VARIABLE twist: put the receiver (camera +y) as far as possible from the patch plane.
+  const double base_twist = twist_towards(-n, patch.plane_normal);
+  const double tilt = 0.5 * std::atan2(sensor.baseline_mm, standoff);  // half the triangulation angle
+  for (int level = 0; level < f.d_t; ++level) {
+    Viewpoint v;
+    v.position = position;
+    v.axis = -n;
+    v.twist_rad = std::fmod(base_twist + kTwoPi * level / f.d_t, kTwoPi);
+    v.standoff_mm = standoff;
+    v.scan_length_mm = scan;
+    v.target_row = static_cast<std::int32_t>(row);
+    v.twist_level = level;
+    out.push_back(v);
+    if (st.bisector_tilt) {
+      const Viewpoint t = bisector_twin(v, s, standoff, tilt);
+      if (obstruction(rough, scene, st.clearance_mm, t.position, (t.position - s).normalized()) == 0) out.push_back(t);
+    }
+  }
+  return 0;
+}
+
+}  // namespace
+
+std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const OcclusionScene& scene,
+                                           const SensorModel& sensor, const ModelSpec& spec,
+                                           const ViewpointSettings& st, GenerationReport* report) {
+  if (st.twist_levels < 1) throw ConfigError("viewpoints.twist_levels must be >= 1");
+  if (st.position_decimation < 1) throw ConfigError("viewpoints.position_decimation must be >= 1");
+  GenerationReport rep;
+  // The footprint's half width at R_o: the position spacing's scale, the farthest-point sample's weight on
+  // normals, and the local patch's radius.
+  PositionFrame f;
+  f.r_o = sensor.optimal_standoff_mm;
+  f.footprint_half_x = f.r_o * std::tan(0.5 * sensor.fov_x_rad);
+  f.d_t = st.scheme == ViewpointScheme::decoupled ? st.twist_levels : 1;
+  f.range_cap = std::min(sensor.range_max_mm, max_range_for_precision_mm(sensor, spec));
+  const double base_scan = design_scan_length_mm(sensor, spec, f.r_o * st.standoff_factor, st.scan_length_design_incidence_rad);
+  const double half_y = sensor.kind == SensorKind::line_scan ? 0.5 * base_scan : f.r_o * std::tan(0.5 * sensor.fov_y_rad);
+  f.patch_radius = std::hypot(f.footprint_half_x, half_y);
+  const std::vector<std::uint32_t> target_rows = viewpoint_positions(rough, st, f.footprint_half_x, rep);
 
   std::vector<std::vector<Viewpoint>> per_position(target_rows.size());
   std::vector<std::uint8_t> why(target_rows.size(), 0);  // 0 kept, 1 no normal, 2 inside, 3 clearance
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, target_rows.size(), 8), [&](const auto& range) {
-    for (std::size_t k = range.begin(); k != range.end(); ++k) {
-      const Eigen::Vector3d s = rough.points[target_rows[k]];
-      const Eigen::Vector3d n = target_normals[k];
-      if (n.squaredNorm() < 0.5) {
-        why[k] = 1;
-        continue;
-      }
-      // The local patch: rough points within the footprint cylinder around the normal that face the same
-      // side. Its rise towards the camera sets R_a; its plane sets the VARIABLE twist.
-      Patch patch;
-      Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
-      Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-      double wsum = 0.0;
-      for (std::size_t i = 0; i < rough.size(); ++i) {
-        const Eigen::Vector3d d = rough.points[i] - s;
-        const double h = d.dot(n);
-        if (std::abs(h) > patch_radius) continue;
-        if ((d - h * n).squaredNorm() > patch_radius * patch_radius) continue;
-        if (rough.normals[i].dot(n) <= 0.0) continue;
-        patch.rise_mm = std::max(patch.rise_mm, h);
-        const double w = rough.area_mm2[i];
-        centroid += w * rough.points[i];
-        wsum += w;
-      }
-      if (wsum > 0.0) {
-        centroid /= wsum;
-        for (std::size_t i = 0; i < rough.size(); ++i) {
-          const Eigen::Vector3d d = rough.points[i] - s;
-          const double h = d.dot(n);
-          if (std::abs(h) > patch_radius || (d - h * n).squaredNorm() > patch_radius * patch_radius ||
-              rough.normals[i].dot(n) <= 0.0)
-            continue;
-          const Eigen::Vector3d c = rough.points[i] - centroid;
-          cov += rough.area_mm2[i] * c * c.transpose();
-        }
-        Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
-        patch.plane_normal = es.eigenvectors().col(0);
-        if (patch.plane_normal.dot(n) < 0.0) patch.plane_normal = -patch.plane_normal;
-      }
-      const double r_a = std::min(patch.rise_mm, st.standoff_adjust_max_mm);
-      const double standoff = std::min((r_o + r_a) * st.standoff_factor, range_cap);
-      const Eigen::Vector3d position = s + standoff * n;
-
-      // Collision avoidance zone: the camera must stand outside the object and clear of it.
-      auto obstruction = [&](const Eigen::Vector3d& pos, const Eigen::Vector3d& out_dir) -> std::uint8_t {
-        if (!keeps_clearance(rough, pos, st.clearance_mm)) return 3;
-        if (auto hit = scene.first_hit(pos, out_dir, 0.0, 1e7); hit && hit->triangle < rough.triangles.size()) {
-          // (Triangles past the rough model's are cell fixtures: leaving through one says nothing of the object.)
-          const Triangle& t = rough.triangles[hit->triangle];
-          const Eigen::Vector3d fn =
-              (rough.points[t[1]] - rough.points[t[0]]).cross(rough.points[t[2]] - rough.points[t[0]]);
-          if (fn.dot(out_dir) > 0.0) return 2;  // leaving through a surface: we were inside
-        }
-        return 0;
-      };
-      auto clear_of_object = [&](const Eigen::Vector3d& pos) { return obstruction(pos, (pos - s).normalized()) == 0; };
-      if (const std::uint8_t o = obstruction(position, n)) {
-        why[k] = o;
-        continue;
-      }
-      const double scan = design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad);
-      // VARIABLE twist: put the receiver (camera +y) as far as possible from the patch plane.
-      const double base_twist = twist_towards(-n, patch.plane_normal);
-      const double tilt = 0.5 * std::atan2(sensor.baseline_mm, standoff);  // half the triangulation angle
-      for (int level = 0; level < d_t; ++level) {
-        Viewpoint v;
-        v.position = position;
-        v.axis = -n;
-        v.twist_rad = std::fmod(base_twist + kTwoPi * level / d_t, kTwoPi);
-        v.standoff_mm = standoff;
-        v.scan_length_mm = scan;
-        v.target_row = static_cast<std::int32_t>(target_rows[k]);
-        v.twist_level = level;
-        per_position[k].push_back(v);
-        if (st.bisector_tilt) {
-          const Viewpoint t = bisector_twin(v, s, standoff, tilt);
-          if (clear_of_object(t.position)) per_position[k].push_back(t);
-        }
-      }
-    }
+    for (std::size_t k = range.begin(); k != range.end(); ++k)
+      why[k] = views_at(rough, scene, sensor, spec, st, f, target_rows[k], per_position[k]);
   });
   std::vector<Viewpoint> out;
   for (std::size_t k = 0; k < per_position.size(); ++k) {
