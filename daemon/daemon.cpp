@@ -1,8 +1,10 @@
 #include "daemon/daemon.hpp"
 
+#include <algorithm>
 #include <cctype>
 #include <csignal>
 #include <iostream>
+#include <limits>
 
 #include <signal.h>
 
@@ -328,8 +330,9 @@ json Daemon::submit(const json& req) {
   }
   r.placement = req.value("placement", std::string());
   if (req.contains("setups")) {
-    if (!req["setups"].is_number_integer()) throw std::invalid_argument("submit: 'setups' must be an integer in [1, " + std::to_string(kMaxSetups) + "]");
-    r.setups = req["setups"].get<int>();  // validate_request checks the range
+    // An integer (control's schema), read wide so that no value wraps into the range validate_request checks.
+    const auto n = req["setups"].get<std::int64_t>();
+    r.setups = static_cast<int>(std::clamp<std::int64_t>(n, std::numeric_limits<int>::min(), std::numeric_limits<int>::max()));
   }
   try {
     validate_request(r, &shutting_down_);

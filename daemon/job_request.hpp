@@ -10,12 +10,10 @@
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
 
+#include "daemon/job_limits.hpp"
 #include "planner/geometry/mesh.hpp"
 
 namespace scancell::daemon {
-
-/// At most this many setups per job (jobs.max_setups, a submit's `setups`).
-inline constexpr int kMaxSetups = 4;
 
 /// What a submit request asks for, validated (files loaded) before the job is accepted.
 struct JobRequest {

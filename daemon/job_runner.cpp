@@ -90,6 +90,20 @@ Eigen::Matrix3d rotation_from(const json& a, const std::string& what) {
   return m;
 }
 
+/// The cell with the part resting exactly at `pose` (object to table), in the form plan_views places it: the
+/// pose's rotation and the plate offset that reproduces it (a setup aligned off centre and turned).
+sp::CellModel resting_at(const sp::CellModel& cell, const sp::TriangleMesh& object, const Eigen::Isometry3d& pose) {
+  sp::CellModel c = cell;
+  c.object_on_table.linear() = pose.linear();
+  c.object_on_table.translation() = sp::plate_offset_of(object, pose);
+  return c;
+}
+
+/// Whether every image carries the in-process virtual scanner's truth (not a device on the wire).
+bool all_have_truth(const std::vector<sp::RangeImage>& images) {
+  return std::all_of(images.begin(), images.end(), [](const sp::RangeImage& im) { return im.has_truth(); });
+}
+
 /// Which side the operator is to put down, for people: the object-frame direction that faces the plate.
 std::string down_side(const Eigen::Vector3d& down) {
   int axis = 0;
@@ -266,8 +280,7 @@ JobState JobRunner::end_setup(Job& j, JobState state, const std::string& cause) 
   {
     std::vector<sp::RangeImage> images;
     for (auto& v : load_job_views(journal_, j.id)) images.push_back(std::move(v.image));
-    const bool with_truth = !images.empty() && !j.truth_object.vertices.empty() &&
-                            std::all_of(images.begin(), images.end(), [](const sp::RangeImage& im) { return im.truth.size() == im.samples.size(); });
+    const bool with_truth = !images.empty() && !j.truth_object.vertices.empty() && all_have_truth(images);
     if (with_truth) truth_figures["verified_mv"] = sp::verify_images(j.truth_object, j.spec, images).mv;
   }
   const std::string instruction = "turn the part over: " + down_side(Eigen::Vector3d(advice.at("down_object")[0].get<double>(),
@@ -326,9 +339,6 @@ json setups_json(Journal& journal, std::int64_t job) {
   }
   return out;
 }
-}  // namespace
-
-namespace {
 
 /// What the executed views cost the cell at its real speeds (the plan's move and sweep times; the simulated
 /// drives may run faster): the figure issue 15 compares with an oracle's plan.
@@ -456,7 +466,7 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause, const j
   // Simulation: the checks against the object on the table. Ground truth exists only where the scanner is
   // simulated in-process: a device on the wire (sim_gige, a real scanner) delivers what a real one does, and
   // the checks that need the true hit points are skipped.
-  const bool with_truth = std::all_of(images.begin(), images.end(), [](const sp::RangeImage& im) { return im.truth.size() == im.samples.size(); });
+  const bool with_truth = all_have_truth(images);
   if (!with_truth && !j.truth_object.vertices.empty())
     result["ground_truth_checks"] = "not run: the scans carry no simulation truth (the scanner is a device on the wire)";
   if (state != JobState::aborted && !images.empty() && !j.truth_object.vertices.empty() && with_truth)
@@ -636,9 +646,6 @@ json JobRunner::execute_round(Job& j, const std::vector<std::int64_t>& plans, co
   return info;
 }
 
-/// After a round: its predicted and realized gain and the rows it failed, then the end (done, or stalled:
-/// every open row given up, max_rounds, nothing new measured, a replan with no view or too little gain per
-/// view) or the next round's plan, journalled. Returns the end state, or nothing to run the next round.
 /// A further round's plan info: what it plans (views, rows, predicted gain) for the rows `measured` leaves
 /// open, its estimate for the whole model, and where the part rests; what a resume and the result read.
 json JobRunner::round_info(const Job& j, const sp::ViewPlan& p, int round, int setup, const std::vector<std::uint8_t>& measured) const {
@@ -677,6 +684,9 @@ void JobRunner::journal_round(Job& j, std::int64_t plan, const json& info, const
                            " lost profiles; not counted as failures");
 }
 
+/// After a round: its predicted and realized gain and the rows it failed, then the end (done, or stalled:
+/// every open row given up, max_rounds, nothing new measured, a replan with no view or too little gain per
+/// view) or the next round's plan, journalled. Returns the end state, or nothing to run the next round.
 std::optional<JobState> JobRunner::close_or_replan(Job& j, std::int64_t plan, const json& info, const std::atomic<int>& stop) {
   const std::vector<json> infos = round_infos(j);
   journal_round(j, plan, info, infos);
@@ -750,11 +760,11 @@ std::optional<JobState> JobRunner::replan(Job& j, const std::vector<std::uint8_t
     else if (fails[r] > 0) weight_scale[r] = settings_.failed_row_weight;
   }
   sp::ViewPlan p = plan_or_stop([&] {
-    // The object rests as round 0 placed it (the configured or the chosen orientation).
+    // The object rests as the setup's first round placed it: in setup 1 the configured or chosen orientation
+    // (placed on the plate again, the same way), in a further setup exactly where its alignment found it.
     sp::CellModel resting = models_.cell;
-    resting.object_on_table.linear() = j.cell.object_on_table.linear();
-    // A further setup rests where the alignment found it (off centre, turned): handed over exactly.
-    if (j.setup > 1) resting.object_on_table.translation() = sp::plate_offset_of(j.object, j.cell.object_on_table);
+    if (j.setup > 1) resting = resting_at(models_.cell, j.object, j.cell.object_on_table);
+    else resting.object_on_table.linear() = j.cell.object_on_table.linear();
     return sp::plan_views(j.object, models_.sensor, j.spec, replan, j.rough_options, settings_.planner_threads,
                           &resting, &measured, &weight_scale, &stop);
   }, stop);
@@ -981,7 +991,7 @@ std::optional<Eigen::Isometry3d> JobRunner::align_to_model(Job& j, const std::st
   bool simulated = true;  // every exploration image carries the simulated scanner's truth
   for (const auto& sc : journal_.scans(plan)) {
     const sp::RangeImage img = sp::range_image_from_ply(journal_.read_scan(sc), sc.file);
-    simulated = simulated && img.truth.size() == img.samples.size();
+    simulated = simulated && img.has_truth();
     std::vector<Eigen::Vector3d> p, n;
     sp::image_points_normals(img, 2, p, n);
     for (std::size_t k = 0; k < p.size(); ++k)
@@ -1034,9 +1044,7 @@ std::optional<JobState> JobRunner::plan_setup(Job& j, int setup, const json& exp
   const std::vector<std::uint8_t> measured = j.coverage->measured_rows();
   sp::PlannerSettings settings = j.settings;
   if (settings.cover.mode == sp::CoverMode::constrained) settings.cover.mode = sp::CoverMode::greedy;  // views register to the model
-  sp::CellModel placed = models_.cell;
-  placed.object_on_table.linear() = estimated.linear();
-  placed.object_on_table.translation() = sp::plate_offset_of(j.object, estimated);
+  const sp::CellModel placed = resting_at(models_.cell, j.object, estimated);
   const sp::ViewPlan p = plan_or_stop([&] {
     return sp::plan_views(j.object, models_.sensor, j.spec, settings, j.rough_options, settings_.planner_threads, &placed, &measured,
                           nullptr, &stop);

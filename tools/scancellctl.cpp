@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "common/timing.hpp"
+#include "daemon/job_limits.hpp"
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
@@ -332,7 +333,7 @@ int main(int argc, char** argv) {
   submit->add_option("--setups", setups,
                      "setups the job may use: after the first, with enough left unmeasured, it waits for the part to be "
                      "turned over as it says (then: scancellctl continue JOB) (default: the daemon's jobs.max_setups)")
-      ->check(CLI::Range(1, 4));
+      ->check(CLI::Range(1, scancell::daemon::kMaxSetups));
   submit->add_flag("--watch", then_watch, "then watch the job to its end");
 
   std::int64_t job = 0;

@@ -58,6 +58,8 @@ struct EdgeCounts {
   bool closed() const { return open == 0 && non_manifold == 0; }
 };
 EdgeCounts count_edges(const TriangleMesh& mesh);
+/// 1 for each vertex on an open edge (one triangle uses it: the rim of an open mesh or of a hole), else 0.
+std::vector<std::uint8_t> open_edge_vertices(const TriangleMesh& mesh);
 
 /// Appends `more` to `into` (its triangles after into's, so ids below the old count stay into's).
 void append_mesh(TriangleMesh& into, const TriangleMesh& more);

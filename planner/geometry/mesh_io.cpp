@@ -369,22 +369,42 @@ double triangle_area(const TriangleMesh& mesh, const Triangle& t) {
 
 namespace scancell::planner {
 
-EdgeCounts count_edges(const TriangleMesh& mesh) {
+namespace {
+
+/// Calls `f(edge, uses)` once per undirected edge of the mesh with the number of triangles using it.
+template <class F>
+void for_each_edge(const TriangleMesh& mesh, F&& f) {
   std::vector<std::pair<std::uint32_t, std::uint32_t>> e;
   e.reserve(mesh.triangles.size() * 3);
   for (const auto& t : mesh.triangles)
     for (int k = 0; k < 3; ++k) e.push_back(std::minmax(t[k], t[(k + 1) % 3]));
   std::sort(e.begin(), e.end());
-  EdgeCounts c;
   for (std::size_t i = 0; i < e.size();) {
     std::size_t j = i;
     while (j < e.size() && e[j] == e[i]) ++j;
-    ++c.edges;
-    c.open += j - i == 1;
-    c.non_manifold += j - i > 2;
+    f(e[i], j - i);
     i = j;
   }
+}
+
+}  // namespace
+
+EdgeCounts count_edges(const TriangleMesh& mesh) {
+  EdgeCounts c;
+  for_each_edge(mesh, [&](const auto&, std::size_t uses) {
+    ++c.edges;
+    c.open += uses == 1;
+    c.non_manifold += uses > 2;
+  });
   return c;
+}
+
+std::vector<std::uint8_t> open_edge_vertices(const TriangleMesh& mesh) {
+  std::vector<std::uint8_t> out(mesh.vertices.size(), 0);
+  for_each_edge(mesh, [&](const auto& edge, std::size_t uses) {
+    if (uses == 1) out[edge.first] = out[edge.second] = 1;
+  });
+  return out;
 }
 
 void append_mesh(TriangleMesh& into, const TriangleMesh& more) {

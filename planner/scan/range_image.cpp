@@ -123,7 +123,7 @@ std::string range_image_to_ply(const RangeImage& img) {
   for (const char* p : kProperties) h << p << "\n";
   h << "end_header\n";
   std::string buf = h.str();
-  if (!img.truth.empty() && img.truth.size() != img.samples.size())
+  if (!img.truth.empty() && !img.has_truth())
     throw DataError("range image: " + std::to_string(img.truth.size()) + " truth records for " + std::to_string(img.samples.size()) + " samples");
   for (int j = 0; j < img.rows; ++j)
     for (int i = 0; i < img.columns; ++i) {

@@ -54,6 +54,8 @@ struct RangeImage {
   /// Simulation only, parallel to `samples`: the virtual scanner's ground truth. Empty from a real scanner.
   std::vector<SampleTruth> truth;
 
+  /// Whether every sample has its simulation truth (an image of the in-process virtual scanner).
+  bool has_truth() const { return truth.size() == samples.size(); }
   const RangeSample& at(int i, int j) const { return samples[static_cast<std::size_t>(j) * columns + i]; }
   std::size_t valid_count() const;
 };

@@ -63,7 +63,7 @@ std::vector<std::uint8_t> vertices_measured(const TriangleMesh& fine, const std:
   constexpr double kCellReach = 0.75, kBoundaryReach = 1.0;
   const std::size_t nv = fine.vertices.size();
   // The side test below reads the triangle each sample hit: simulation truth (callers check it is there).
-  if (img.truth.size() != img.samples.size()) throw DataError("verification needs the simulated scanner's truth for every sample");
+  if (!img.has_truth()) throw DataError("verification needs the simulated scanner's truth for every sample");
   // A compliant cell has δx² + δy² ≤ 1/ρ, so it reaches at most (δx + δy) ≤ √(2/ρ) from its sample: the 27
   // grid cells of side √2/√ρ around a vertex hold every cell that can contain it.
   const double radius = std::sqrt(2.0 / spec.density_per_mm2);
@@ -116,26 +116,6 @@ std::vector<std::uint8_t> vertices_measured(const TriangleMesh& fine, const std:
   return hit;
 }
 
-/// 1 for each vertex on an edge that only one triangle uses (the rim of an open mesh).
-std::vector<std::uint8_t> boundary_vertices(const TriangleMesh& m) {
-  std::vector<std::pair<std::uint32_t, std::uint32_t>> edges;
-  edges.reserve(3 * m.triangles.size());
-  for (const auto& t : m.triangles)
-    for (int k = 0; k < 3; ++k) {
-      const std::uint32_t a = t[k], b = t[(k + 1) % 3];
-      edges.emplace_back(std::min(a, b), std::max(a, b));
-    }
-  std::sort(edges.begin(), edges.end());
-  std::vector<std::uint8_t> out(m.vertices.size(), 0);
-  for (std::size_t i = 0; i < edges.size();) {
-    std::size_t j = i;
-    while (j < edges.size() && edges[j] == edges[i]) ++j;
-    if (j - i == 1) out[edges[i].first] = out[edges[i].second] = 1;
-    i = j;
-  }
-  return out;
-}
-
 /// Each fine vertex's share of the area (a third of each adjacent triangle) and the total.
 void share_area(const TriangleMesh& fine, Verification& out) {
   out.vertex_area_mm2.assign(fine.vertices.size(), 0.0);
@@ -157,7 +137,7 @@ Verification verify_views(const TriangleMesh& fine, const SensorModel& sensor, c
   share_area(fine, out);
   const auto vertex_normals = area_weighted_normals(fine);
   const auto tri_normals = face_normals(fine);
-  const auto on_boundary = boundary_vertices(fine);
+  const auto on_boundary = open_edge_vertices(fine);
   TriangleMesh scene_mesh = fine;
   append_mesh(scene_mesh, options.occluders);
   const OcclusionScene scene(scene_mesh);
@@ -233,12 +213,12 @@ Verification verify_images(const TriangleMesh& fine, const ModelSpec& spec, cons
   share_area(fine, out);
   const auto vertex_normals = area_weighted_normals(fine);
   const auto tri_normals = face_normals(fine);
-  const auto on_boundary = boundary_vertices(fine);
+  const auto on_boundary = open_edge_vertices(fine);
   out.measured.assign(nv, 0);
   double cumulative = 0.0;
   for (std::size_t k = 0; k < images.size(); ++k) {
     const RangeImage& im = images[k];
-    if (im.truth.size() != im.samples.size())
+    if (!im.has_truth())
       throw DataError("scan " + std::to_string(k) + " has no simulation truth (a real scanner's image?): verification against the "
                       "fine model needs the triangle each sample hit, which only the virtual scanner records");
     for (std::size_t q = 0; q < im.samples.size(); ++q)
