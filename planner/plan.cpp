@@ -511,6 +511,7 @@ json settings_json(const ViewPlan& p) {
                 {"exact_time_limit_s", p.settings.cover.exact_time_limit_s},
                 {"min_view_gain_mm2", p.settings.cover.min_view_gain},
                 {"local_search_iterations", p.settings.cover.local_search_iterations},
+                {"local_search_stall_iterations", p.settings.cover.local_search_stall_iterations},
                 {"local_search_time_limit_s", p.settings.cover.local_search_time_limit_s}}},
               {"matrix", {{"ray_offset_mm", p.settings.matrix.ray_offset_mm}}}};
   {
@@ -673,6 +674,7 @@ void cover_report_json(const ViewPlan& p, json& j) {
                                     {"best_views", ls.best_views},
                                     {"iterations", ls.iterations},
                                     {"improvements", ls.improvements},
+                                    {"last_improvement_iteration", ls.last_improvement_iteration},
                                     {"rejected_unregistered", ls.rejected_unregistered},
                                     {"time_s", ls.seconds},
                                     // Cut by the clock rather than the swap budget: the cover may depend on the machine.

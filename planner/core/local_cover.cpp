@@ -156,7 +156,7 @@ class Registration {
 class Search {
  public:
   Search(const MeasurabilityMatrix& m, const RowIndex& ix, std::vector<char> need)
-      : m_(m), ix_(ix), need_(std::move(need)), in_(m.n_cols(), 0), cnt_(m.n_rows, 0), omega_(m.n_rows, 1),
+      : m_(m), ix_(ix), need_(std::move(need)), in_(m.n_cols(), 0), cnt_(m.n_rows, 0), xor_(m.n_rows, 0), omega_(m.n_rows, 1),
         score_(m.n_cols(), 0), age_(m.n_cols(), 0), pos_(m.n_rows, kNone) {
     for (std::uint32_t r = 0; r < m.n_rows; ++r)
       if (need_[r]) {
@@ -175,10 +175,10 @@ class Search {
     age_[j] = now;
     m_.columns[j].for_each([&](std::uint32_t r) {
       if (!need_[r]) return;
+      xor_[r] ^= j;
       if (++cnt_[r] == 1) {
         cover(r);
-        for (auto it = ix_.begin(r); it != ix_.end(r); ++it)
-          if (*it != j) score_[*it] -= omega_[r];
+        add_to_scores(r, -omega_[r], j);
       } else if (cnt_[r] == 2) {
         score_[sole_other(r, j)] += omega_[r];
       }
@@ -192,10 +192,10 @@ class Search {
     age_[j] = now;
     m_.columns[j].for_each([&](std::uint32_t r) {
       if (!need_[r]) return;
+      xor_[r] ^= j;
       if (--cnt_[r] == 0) {
         uncover(r);
-        for (auto it = ix_.begin(r); it != ix_.end(r); ++it)
-          if (*it != j) score_[*it] += omega_[r];
+        add_to_scores(r, omega_[r], j);
       } else if (cnt_[r] == 1) {
         score_[sole_other(r, j)] -= omega_[r];
       }
@@ -205,9 +205,10 @@ class Search {
 
   /// Every uncovered row weighs one more.
   void raise_uncovered_weights() {
+    std::int64_t* score = score_.data();
     for (auto r : uncovered_) {
       ++omega_[r];
-      for (auto it = ix_.begin(r); it != ix_.end(r); ++it) ++score_[*it];
+      for (const std::uint32_t *it = ix_.begin(r), *e = ix_.end(r); it != e; ++it) ++score[*it];
     }
   }
 
@@ -241,10 +242,20 @@ class Search {
     if (age_[a] != age_[b]) return age_[a] < age_[b];
     return a < b;
   }
+  /// score += d for every column of row r but j (j measures r). The hot loop of a swap (each row a swap
+  /// covers or uncovers, times its candidates): a plain pointer walk, j corrected after it, not tested in it.
+  void add_to_scores(std::uint32_t r, std::int64_t d, std::uint32_t j) {
+    std::int64_t* score = score_.data();
+    for (const std::uint32_t *it = ix_.begin(r), *e = ix_.end(r); it != e; ++it) score[*it] += d;
+    score[j] -= d;
+  }
+  /// The one chosen column covering row r besides j, where r is covered by j and one other (or, j just left,
+  /// by that one alone): the XOR of a row's chosen columns is that column, in O(1) rather than a walk over
+  /// the row's candidates (on a dense mesh as given, hundreds per row, and most rows are covered twice).
   std::uint32_t sole_other(std::uint32_t r, std::uint32_t j) const {
-    for (auto it = ix_.begin(r); it != ix_.end(r); ++it)
-      if (in_[*it] && *it != j) return *it;
-    throw std::logic_error("local_search_cover: row count out of step with the chosen columns");
+    const std::uint32_t other = xor_[r] ^ (in_[j] ? j : 0u);
+    if (other == j || !in_[other]) throw std::logic_error("local_search_cover: row count out of step with the chosen columns");
+    return other;
   }
   void uncover(std::uint32_t r) {
     pos_[r] = static_cast<std::uint32_t>(uncovered_.size());
@@ -263,6 +274,7 @@ class Search {
   std::vector<char> need_;
   std::vector<char> in_;
   std::vector<std::uint32_t> cnt_;
+  std::vector<std::uint32_t> xor_;  // per row: the XOR of the chosen columns that cover it
   std::vector<std::int64_t> omega_, score_;
   std::vector<std::uint64_t> age_;
   std::vector<std::uint32_t> pos_, uncovered_, chosen_;
@@ -312,8 +324,9 @@ std::vector<std::uint32_t> local_search_cover(const MeasurabilityMatrix& m, cons
       }
       best = std::move(cand);
       ++rep.improvements;
+      rep.last_improvement_iteration = rep.iterations;
     };
-    while (rep.iterations < iterations) {
+    while (rep.iterations < iterations && rep.iterations - rep.last_improvement_iteration < st.local_search_stall_iterations) {
       if ((rep.iterations & 255) == 0 &&
           seconds_since(t0) > time_limit_s) {
         rep.time_limit_hit = true;

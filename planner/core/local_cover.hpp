@@ -14,7 +14,7 @@
 // and the repaired cover is kept only if it is still smaller than the best so far. So the result is a
 // registered cover whenever the start was, and never larger than the start.
 //
-// Deterministic for a seed: the budget is a count of swaps; the wall-clock limit is a safety cap, and when it
+// Deterministic for a seed: the budget is a count of swaps (and of swaps since the last smaller cover); the wall-clock limit is a safety cap, and when it
 // cuts the search the report says so (only then may the result depend on the machine).
 #include <cstdint>
 #include <string>
@@ -29,13 +29,15 @@ struct LocalSearchReport {
   std::size_t best_views = 0;
   std::uint64_t iterations = 0;     // swaps done
   std::size_t improvements = 0;     // smaller registered covers found
+  std::uint64_t last_improvement_iteration = 0;  // the swap count when the best cover was found
   std::size_t rejected_unregistered = 0;  // smaller covers whose repair was not smaller than the best
   double seconds = 0.0;
   bool time_limit_hit = false;
 };
 
 /// A cover of the rows `start` covers (those of positive weight), with at most as many views, registered
-/// under the settings when registration applies. `iterations` swaps at most, `time_limit_s` at most.
+/// under the settings when registration applies. `iterations` swaps at most, and no more than
+/// `settings.local_search_stall_iterations` after the last smaller cover; `time_limit_s` at most.
 std::vector<std::uint32_t> local_search_cover(const MeasurabilityMatrix& m, const std::vector<double>& row_weight,
                                               const CoverSettings& settings, const std::vector<std::uint32_t>& start,
                                               std::uint64_t iterations, double time_limit_s, std::uint64_t seed,

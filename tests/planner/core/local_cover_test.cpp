@@ -156,5 +156,45 @@ TEST(LocalSearch, SameSeedSameCoverAndNeverLargerThanItsStart) {
   }
 }
 
+/// The stall budget only cuts the same trajectory short: a search stopped `stall` swaps after its last smaller
+/// cover returns what a search with exactly that many swaps returns, and a start that is already minimal
+/// stops after `stall` swaps, not the whole budget.
+TEST(LocalSearch, StopsAStallBudgetAfterItsLastSmallerCover) {
+  std::mt19937 rng(5);
+  const std::uint32_t rows = 400, cols = 300;
+  std::vector<std::vector<std::uint32_t>> cs(cols);
+  for (std::uint32_t j = 0; j < cols; ++j) {
+    const std::uint32_t c = rng() % rows, len = 5 + rng() % 30;
+    for (std::uint32_t k = 0; k < len; ++k) cs[j].push_back((c + k * (1 + j % 3)) % rows);
+    std::sort(cs[j].begin(), cs[j].end());
+    cs[j].erase(std::unique(cs[j].begin(), cs[j].end()), cs[j].end());
+  }
+  const auto m = matrix(rows, cs);
+  const std::vector<double> w(rows, 1.0);
+  CoverSettings st;
+  st.mode = CoverMode::greedy;
+  const CoverResult g = greedy_cover(m, w, st);
+  st.local_search_stall_iterations = 300;
+  LocalSearchReport cut;
+  const auto a = local_search_cover(m, w, st, g.views, 100000, 60.0, 9, &cut);
+  ASSERT_GE(cut.improvements, 1u);
+  EXPECT_EQ(cut.iterations, cut.last_improvement_iteration + 300);
+  st.local_search_stall_iterations = 1000000000;
+  LocalSearchReport full;
+  const auto b = local_search_cover(m, w, st, g.views, cut.iterations, 60.0, 9, &full);
+  EXPECT_EQ(a, b);
+  EXPECT_EQ(full.iterations, cut.iterations);
+
+  // Rows 0-1, 2-3 and 4-5 each need their own view (rows 0 and 5 have one column each, and no column holds
+  // rows 2 and 3 with either): the start is minimal.
+  const auto thirds = matrix(6, {{0, 1}, {2, 3}, {4, 5}, {1, 2}, {3, 4}});
+  st.local_search_stall_iterations = 50;
+  LocalSearchReport none;
+  const auto c = local_search_cover(thirds, std::vector<double>(6, 1.0), st, {0, 1, 2}, 100000, 60.0, 1, &none);
+  EXPECT_EQ(c.size(), 3u);
+  EXPECT_EQ(none.improvements, 0u);
+  EXPECT_EQ(none.iterations, 50u);
+}
+
 }  // namespace
 }  // namespace scancell::planner
