@@ -212,11 +212,11 @@ PlannerSettings load_planner_settings(const std::filesystem::path& file) {
         c.fail(c.key_path("local_search_iterations"), "must be a whole number in [0, 1e9], got " + std::to_string(it));
       p.cover.local_search_iterations = static_cast<std::uint64_t>(it);
     }
-    if (c.has("local_search_stall_iterations")) {
-      const double it = c.get<double>("local_search_stall_iterations");
-      if (!(it >= 1.0 && it <= 1e9 && it == std::floor(it)))
-        c.fail(c.key_path("local_search_stall_iterations"), "must be a whole number in [1, 1e9], got " + std::to_string(it));
-      p.cover.local_search_stall_iterations = static_cast<std::uint64_t>(it);
+    if (c.has("local_search_stall_work")) {
+      const double it = c.get<double>("local_search_stall_work");
+      if (!(it >= 1.0 && it <= 1e15 && it == std::floor(it)))
+        c.fail(c.key_path("local_search_stall_work"), "must be a whole number in [1, 1e15], got " + std::to_string(it));
+      p.cover.local_search_stall_work = static_cast<std::uint64_t>(it);
     }
     p.cover.local_search_time_limit_s = c.get_or<double>("local_search_time_limit_s", p.cover.local_search_time_limit_s);
     if (!(p.cover.local_search_time_limit_s > 0.0 && p.cover.local_search_time_limit_s <= 3600.0))

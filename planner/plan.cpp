@@ -511,7 +511,7 @@ json settings_json(const ViewPlan& p) {
                 {"exact_time_limit_s", p.settings.cover.exact_time_limit_s},
                 {"min_view_gain_mm2", p.settings.cover.min_view_gain},
                 {"local_search_iterations", p.settings.cover.local_search_iterations},
-                {"local_search_stall_iterations", p.settings.cover.local_search_stall_iterations},
+                {"local_search_stall_work", p.settings.cover.local_search_stall_work},
                 {"local_search_time_limit_s", p.settings.cover.local_search_time_limit_s}}},
               {"matrix", {{"ray_offset_mm", p.settings.matrix.ray_offset_mm}}}};
   {
@@ -675,6 +675,8 @@ void cover_report_json(const ViewPlan& p, json& j) {
                                     {"iterations", ls.iterations},
                                     {"improvements", ls.improvements},
                                     {"last_improvement_iteration", ls.last_improvement_iteration},
+                                    {"work", ls.work},
+                                    {"work_at_last_improvement", ls.work_at_last_improvement},
                                     {"rejected_unregistered", ls.rejected_unregistered},
                                     {"time_s", ls.seconds},
                                     // Cut by the clock rather than the swap budget: the cover may depend on the machine.

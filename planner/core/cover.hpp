@@ -35,10 +35,12 @@ struct CoverSettings {
   /// greedy and constrained modes: swaps of the local search that then looks for a smaller cover
   /// (local_cover.hpp); 0 keeps greedy's cover. Deterministic: the budget is counted, not timed.
   std::uint64_t local_search_iterations = 0;
-  /// The local search stops after this many swaps without a smaller cover (counted, so deterministic). On
-  /// whole objects the last smaller cover came within 4,700 swaps of the one before on 5k-row models and
-  /// within 7,800 on a 37k-row mesh as given; each swap there costs ~0.15-0.3 ms.
-  std::uint64_t local_search_stall_iterations = 8000;
+  /// The local search stops when it has visited this many matrix elements (column rows walked, score
+  /// updates) since its last smaller cover: work counted, not timed, so deterministic, and scaled to the
+  /// instance. A swap visits ~500-4,000 elements on 5k-row models (the default never stops them within
+  /// 20,000 swaps) and 176k-431k on 26k-38k-row meshes as given, where 2e9 is 4,600-11,000 swaps, 1-2 s; the
+  /// longest stretch between smaller covers seen there was 1.3e9.
+  std::uint64_t local_search_stall_work = 2000000000ULL;
   double local_search_time_limit_s = 5.0;  // safety cap on the local search's wall-clock time
 };
 

@@ -166,11 +166,14 @@ class Search {
   }
 
   const std::vector<std::uint32_t>& chosen() const { return chosen_; }
+  /// Elements visited so far (column rows walked, score updates): the search's work, counted, not timed.
+  std::uint64_t work() const { return work_; }
   std::size_t uncovered() const { return uncovered_.size(); }
   std::uint32_t uncovered_row(std::size_t k) const { return uncovered_[k]; }
 
   void add(std::uint32_t j, std::uint64_t now) {
     in_[j] = 1;
+    work_ += m_.columns[j].count();
     chosen_.push_back(j);
     age_[j] = now;
     m_.columns[j].for_each([&](std::uint32_t r) {
@@ -188,6 +191,7 @@ class Search {
 
   void remove(std::uint32_t j, std::uint64_t now) {
     in_[j] = 0;
+    work_ += m_.columns[j].count();
     chosen_.erase(std::find(chosen_.begin(), chosen_.end(), j));
     age_[j] = now;
     m_.columns[j].for_each([&](std::uint32_t r) {
@@ -207,6 +211,7 @@ class Search {
   void raise_uncovered_weights() {
     std::int64_t* score = score_.data();
     for (auto r : uncovered_) {
+      work_ += ix_.degree(r);
       ++omega_[r];
       for (const std::uint32_t *it = ix_.begin(r), *e = ix_.end(r); it != e; ++it) ++score[*it];
     }
@@ -245,6 +250,7 @@ class Search {
   /// score += d for every column of row r but j (j measures r). The hot loop of a swap (each row a swap
   /// covers or uncovers, times its candidates): a plain pointer walk, j corrected after it, not tested in it.
   void add_to_scores(std::uint32_t r, std::int64_t d, std::uint32_t j) {
+    work_ += ix_.degree(r);
     std::int64_t* score = score_.data();
     for (const std::uint32_t *it = ix_.begin(r), *e = ix_.end(r); it != e; ++it) score[*it] += d;
     score[j] -= d;
@@ -278,6 +284,7 @@ class Search {
   std::vector<std::int64_t> omega_, score_;
   std::vector<std::uint64_t> age_;
   std::vector<std::uint32_t> pos_, uncovered_, chosen_;
+  std::uint64_t work_ = 0;
 };
 
 }  // namespace
@@ -309,6 +316,7 @@ std::vector<std::uint32_t> local_search_cover(const MeasurabilityMatrix& m, cons
     const bool registration = registration_applies(st);
     std::uint64_t now = 1;
     for (auto j : start) s.add(j, now);
+    rep.work_at_last_improvement = s.work();
     std::uint64_t rng = seed ^ 0x5ca9ce11ULL;
     std::int64_t last_added = -1;
     auto record = [&] {
@@ -325,8 +333,9 @@ std::vector<std::uint32_t> local_search_cover(const MeasurabilityMatrix& m, cons
       best = std::move(cand);
       ++rep.improvements;
       rep.last_improvement_iteration = rep.iterations;
+      rep.work_at_last_improvement = s.work();
     };
-    while (rep.iterations < iterations && rep.iterations - rep.last_improvement_iteration < st.local_search_stall_iterations) {
+    while (rep.iterations < iterations && s.work() - rep.work_at_last_improvement < st.local_search_stall_work) {
       if ((rep.iterations & 255) == 0 &&
           seconds_since(t0) > time_limit_s) {
         rep.time_limit_hit = true;
@@ -351,6 +360,7 @@ std::vector<std::uint32_t> local_search_cover(const MeasurabilityMatrix& m, cons
       ++rep.iterations;
     }
     if (s.uncovered() == 0 && s.chosen().size() < best.size()) record();
+    rep.work = s.work();
   }
   rep.best_views = best.size();
   rep.seconds = seconds_since(t0);

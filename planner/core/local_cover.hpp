@@ -30,6 +30,8 @@ struct LocalSearchReport {
   std::uint64_t iterations = 0;     // swaps done
   std::size_t improvements = 0;     // smaller registered covers found
   std::uint64_t last_improvement_iteration = 0;  // the swap count when the best cover was found
+  std::uint64_t work = 0;                        // elements visited (Search::work)
+  std::uint64_t work_at_last_improvement = 0;
   std::size_t rejected_unregistered = 0;  // smaller covers whose repair was not smaller than the best
   double seconds = 0.0;
   bool time_limit_hit = false;

@@ -156,9 +156,9 @@ TEST(LocalSearch, SameSeedSameCoverAndNeverLargerThanItsStart) {
   }
 }
 
-/// The stall budget only cuts the same trajectory short: a search stopped `stall` swaps after its last smaller
-/// cover returns what a search with exactly that many swaps returns, and a start that is already minimal
-/// stops after `stall` swaps, not the whole budget.
+/// The stall budget only cuts the same trajectory short: a search stopped once it visited `stall` elements
+/// after its last smaller cover returns what a search with exactly that many swaps returns, and a start
+/// that is already minimal stops after that much work, not the whole swap budget.
 TEST(LocalSearch, StopsAStallBudgetAfterItsLastSmallerCover) {
   std::mt19937 rng(5);
   const std::uint32_t rows = 400, cols = 300;
@@ -174,26 +174,30 @@ TEST(LocalSearch, StopsAStallBudgetAfterItsLastSmallerCover) {
   CoverSettings st;
   st.mode = CoverMode::greedy;
   const CoverResult g = greedy_cover(m, w, st);
-  st.local_search_stall_iterations = 300;
+  st.local_search_stall_work = 20000;
   LocalSearchReport cut;
   const auto a = local_search_cover(m, w, st, g.views, 100000, 60.0, 9, &cut);
   ASSERT_GE(cut.improvements, 1u);
-  EXPECT_EQ(cut.iterations, cut.last_improvement_iteration + 300);
-  st.local_search_stall_iterations = 1000000000;
+  ASSERT_LT(cut.iterations, 100000u);  // stopped by the stall, not the swap budget
+  EXPECT_GE(cut.work - cut.work_at_last_improvement, 20000u);
+  st.local_search_stall_work = 1000000000000ULL;
   LocalSearchReport full;
   const auto b = local_search_cover(m, w, st, g.views, cut.iterations, 60.0, 9, &full);
   EXPECT_EQ(a, b);
   EXPECT_EQ(full.iterations, cut.iterations);
+  EXPECT_EQ(full.last_improvement_iteration, cut.last_improvement_iteration);
 
   // Rows 0-1, 2-3 and 4-5 each need their own view (rows 0 and 5 have one column each, and no column holds
   // rows 2 and 3 with either): the start is minimal.
   const auto thirds = matrix(6, {{0, 1}, {2, 3}, {4, 5}, {1, 2}, {3, 4}});
-  st.local_search_stall_iterations = 50;
+  st.local_search_stall_work = 500;
   LocalSearchReport none;
   const auto c = local_search_cover(thirds, std::vector<double>(6, 1.0), st, {0, 1, 2}, 100000, 60.0, 1, &none);
   EXPECT_EQ(c.size(), 3u);
   EXPECT_EQ(none.improvements, 0u);
-  EXPECT_EQ(none.iterations, 50u);
+  EXPECT_GT(none.iterations, 10u);
+  EXPECT_LT(none.iterations, 500u);  // a swap here visits at least a column of two rows
+  EXPECT_GE(none.work - none.work_at_last_improvement, 500u);
 }
 
 }  // namespace
