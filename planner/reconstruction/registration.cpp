@@ -289,6 +289,40 @@ Vec6 solve_fixed_directions(const Eigen::GeneralizedSelfAdjointEigenSolver<Mat6>
   return x;
 }
 
+/// The plate motions (IcpOptions::plate_axis) as a basis of the six unknowns (ω·lever_mm, v): a turn θ about
+/// the axis through P (as the samples have moved so far: P = W p0 + d, direction u = W u0) moves a sample at
+/// lever l by θ u × (l + d − P), i.e. ω = θ u and v = θ u × (d − P); and the two shifts across u.
+Eigen::Matrix<double, 6, 3> plate_basis(const IcpOptions::PlateAxis& a, const Eigen::Matrix3d& w, const Eigen::Vector3d& d,
+                                        double lever_mm) {
+  const Eigen::Vector3d u = (w * a.direction).normalized(), p = w * a.point + d;
+  const Eigen::Vector3d e1 = u.unitOrthogonal(), e2 = u.cross(e1);
+  Eigen::Matrix<double, 6, 3> b = Eigen::Matrix<double, 6, 3>::Zero();
+  b.col(0) << u, u.cross(d - p) / lever_mm;
+  b.col(1).tail<3>() = e1;
+  b.col(2).tail<3>() = e2;
+  return b;
+}
+
+/// solve_fixed_directions within the plate motions: the same generalized eigenproblem on the reduced
+/// equations, the step mapped back to the six unknowns.
+Vec6 solve_plate_motions(const NormalEquations& e, const Eigen::Matrix<double, 6, 3>& b, const IcpOptions& o, IcpResult& r) {
+  const Eigen::Matrix3d a = b.transpose() * e.ata * b, disp = b.transpose() * e.disp * b;
+  const Eigen::Vector3d atb = b.transpose() * e.atb;
+  Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::Matrix3d> es(a, disp);
+  r.conditioning = es.eigenvalues()(0);
+  r.weakest = (b * es.eigenvectors().col(0)).normalized();
+  Eigen::Vector3d y = Eigen::Vector3d::Zero();
+  r.free_directions = 0;
+  for (int k = 0; k < 3; ++k) {
+    if (es.eigenvalues()(k) < o.min_conditioning) {
+      ++r.free_directions;
+      continue;
+    }
+    y += es.eigenvectors().col(k) * (es.eigenvectors().col(k).dot(atb) / es.eigenvalues()(k));
+  }
+  return b * y;
+}
+
 /// Trust region: no sample moves more than half the pairing distance in one step, so that a poorly fixed
 /// direction cannot throw the view off the model before the correspondences catch up; and the view turns by
 /// at most 0.05 rad (3°) a step, where the linearisation holds.
@@ -331,6 +365,8 @@ void accept(const IcpSamples& s, const Eigen::Matrix3d& w, const Eigen::Vector3d
 IcpResult register_points(const std::vector<Eigen::Vector3d>& pts_in, const ModelCloud& model, const IcpOptions& o,
                           const std::vector<Eigen::Vector3d>& pivots_in, const std::vector<Eigen::Vector3d>& normals_in) {
   IcpResult r;
+  if (o.plate_axis && !pivots_in.empty())
+    throw std::invalid_argument("register_points: plate motions are rigid motions; they take no pivots");
   const IcpSamples s = icp_samples(pts_in, pivots_in, normals_in);
   if (s.pts.size() < 50) {
     r.why = std::to_string(s.pts.size()) + " samples" + (normals_in.empty() ? "" : " with a surface normal") + ", too few to register";
@@ -359,15 +395,20 @@ IcpResult register_points(const std::vector<Eigen::Vector3d>& pts_in, const Mode
     // stripes are lines: turning the camera about them changes nothing) is neither fixed nor a slide; the
     // ridge makes it cost a little, so that it reads as free and the fixed directions carry none of it.
     e.disp += Mat6::Identity() * (1e-4 * e.disp.trace() / 6.0);
-    Eigen::GeneralizedSelfAdjointEigenSolver<Mat6> es(e.ata, e.disp);
-    r.conditioning = es.eigenvalues()(0);
-    r.weakest = es.eigenvectors().col(0).normalized();
+    Vec6 x;
+    if (o.plate_axis) {
+      x = solve_plate_motions(e, plate_basis(*o.plate_axis, w, d, o.lever_mm), o, r);
+    } else {
+      Eigen::GeneralizedSelfAdjointEigenSolver<Mat6> es(e.ata, e.disp);
+      r.conditioning = es.eigenvalues()(0);
+      r.weakest = es.eigenvectors().col(0).normalized();
+      x = solve_fixed_directions(es, e.atb, o, r);
+    }
     if (r.conditioning < o.min_conditioning && !o.partial) {
       r.why = "ill-conditioned: the view's shape does not fix its pose (conditioning " + std::to_string(r.conditioning) +
               "; a plane or a surface of revolution slides)";
       return r;
     }
-    Vec6 x = solve_fixed_directions(es, e.atb, o, r);
     limit_step(x, lever, o);
     const Eigen::Vector3d omega = x.head<3>() / o.lever_mm, v = x.tail<3>();
     Eigen::Matrix3d step = Eigen::Matrix3d::Identity();

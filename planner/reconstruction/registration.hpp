@@ -6,6 +6,7 @@
 // ill-conditioned instead of drifting along its free directions.
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -50,6 +51,14 @@ struct IcpOptions {
   /// left where the positioner put it in the others (a face-on plane: only its distance and tilt), and the
   /// result says how many directions were left.
   bool partial = false;
+  /// Plate motions only (a part resting on a plate): turns about this axis and shifts across it; its height
+  /// along the axis and its tilt stay where the positioner put them (the plate fixes them). A point on the
+  /// axis and its direction, in the frame of the points as given. Needs points without pivots (rigid motions).
+  struct PlateAxis {
+    Eigen::Vector3d point = Eigen::Vector3d::Zero();
+    Eigen::Vector3d direction = Eigen::Vector3d::UnitZ();
+  };
+  std::optional<PlateAxis> plate_axis;
 };
 
 struct IcpResult {

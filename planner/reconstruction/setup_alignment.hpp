@@ -5,8 +5,10 @@
 // exploration samples, expressed in the object frame as if the part lay exactly as asked, are aligned
 // globally: a coarse search over the turn about the table axis, each start refined by point-to-plane ICP
 // (registration.hpp) with a wide pairing distance, distinct outcomes then refined with a tight one.
-// What the shape cannot fix besides the turn (the height of a part with vertical walls, its tilt) stays where
-// the resting pose put it: the plate fixes those. The best fit is kept only when it is good, its shape fixes
+// Both stages move the part only as the plate lets it (IcpOptions::plate_axis: a turn about the table axis,
+// a shift across it): the part rests on the face the resting pose names, so the plate fixes its height and
+// tilt exactly. Left free, the fit traded them against the samples' noise: an elephant came out tilted
+// 0.035° and 0.054 mm off at its centre, against 0.004° and 0.011 mm with plate motions only. The best fit is kept only when it is good, its shape fixes
 // the turn, and no distinct pose fits nearly as well: a part symmetric about the table axis (a surface of
 // revolution) or with a discrete symmetry (two or more turns fit alike) cannot tell its turn, and merging it
 // would corrupt the model. Refused, named.

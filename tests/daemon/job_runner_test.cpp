@@ -792,8 +792,11 @@ TEST_F(SimCell, TwoSetupsTurnThePartOverAlignItAndMeasureWhatRestedOnThePlate) {
             << result["verified_mv"] << ", alignment " << a.dump() << "\n";
   ASSERT_TRUE(a["ok"].get<bool>()) << a.dump();
   EXPECT_GT(a["sim_operator_turn_deg"].get<double>(), 1.0);  // the operator was off, and the alignment found it
-  EXPECT_LT(a["sim_residual_mm"].get<double>(), 0.1);
-  EXPECT_LT(a["sim_residual_deg"].get<double>(), 0.1);
+  // Issue 20's target: the placement found to 0.05 mm and 0.05° (0.011 mm, 0.004° since the fit moves the
+  // part only as the plate lets it; 0.054 mm, 0.036° when it could also tilt and lift).
+  EXPECT_LT(a["sim_residual_mm"].get<double>(), 0.05);
+  EXPECT_LT(a["sim_residual_deg"].get<double>(), 0.05);
+  EXPECT_LT(std::abs(a["tilt_rad"].get<double>()), 1e-9);  // the plate fixes the tilt
   EXPECT_GT(result["setups"][1]["views"].get<int>(), 0);
   // What setup 2 measured is where it is: the views registered and the ground truth agrees.
   EXPECT_GT(result["measured_coverage"].get<double>(), after_setup1 + 0.02);

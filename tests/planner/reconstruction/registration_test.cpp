@@ -62,6 +62,49 @@ TEST(Registration, UndoesAKnownPoseErrorOnACubeCorner) {
   EXPECT_GT(r.conditioning, 3 * IcpOptions{}.min_conditioning);
 }
 
+/// Plate motions only (a part resting on a plate, issue 20): a turn about the table axis and a shift on the
+/// plate are undone; a tilt and a lift the points also carry are left exactly as they were (the plate fixes
+/// them, so the fit must not trade them against noise); pivots are refused.
+TEST(Registration, PlateMotionsUndoATurnAndShiftAndLeaveTiltAndHeight) {
+  const TriangleMesh cube = load_mesh(testing::source_path("tests/data/cube50.off"));
+  const ModelCloud model = ModelCloud::from_mesh(cube, 1.0);
+  const auto pts = scan(cube, {50, 50, 50}, Eigen::Vector3d(50, 50, 50) + 200.0 * Eigen::Vector3d(1, 1, 1).normalized());
+  const Eigen::Vector3d axis_point(20, 10, 0), up = Eigen::Vector3d::UnitZ();
+  // The operator's error: 2° about the table axis and 1.2 mm across it.
+  Eigen::Isometry3d plate = Eigen::Isometry3d::Identity();
+  plate.translate(axis_point).rotate(Eigen::AngleAxisd(2.0 * kDeg, up)).translate(-axis_point);
+  plate.pretranslate(Eigen::Vector3d(0.9, -0.8, 0.0));
+  std::vector<Eigen::Vector3d> seen;
+  for (const auto& p : pts) seen.push_back(plate * p);
+  IcpOptions o;
+  o.plate_axis = IcpOptions::PlateAxis{axis_point, up};
+  const IcpResult r = register_points(seen, model, o);
+  ASSERT_TRUE(r.ok) << r.why;
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  for (const auto& p : pts) centroid += p / static_cast<double>(pts.size());
+  const Eigen::Isometry3d left = r.correction * plate;
+  EXPECT_LT(Eigen::AngleAxisd(left.linear()).angle(), 0.02 * kDeg);
+  EXPECT_LT((left * centroid - centroid).norm(), 0.02);
+  // The correction itself is a plate motion: its rotation is about the axis and it moves nothing along it.
+  EXPECT_NEAR(std::abs(Eigen::AngleAxisd(r.correction.linear()).axis().dot(up)), 1.0, 1e-9);
+  EXPECT_NEAR((r.correction * centroid - centroid).dot(up), 0.0, 1e-9);
+
+  // Tilted by 0.5° about x and lifted 0.3 mm as well: only the turn and the shift are undone.
+  Eigen::Isometry3d tilt = Eigen::Isometry3d::Identity();
+  tilt.rotate(Eigen::AngleAxisd(0.5 * kDeg, Eigen::Vector3d::UnitX())).pretranslate(Eigen::Vector3d(0, 0, 0.3));
+  seen.clear();
+  for (const auto& p : pts) seen.push_back(plate * tilt * p);
+  const IcpResult t = register_points(seen, model, o);
+  ASSERT_TRUE(t.ok) << t.why;
+  EXPECT_NEAR(std::abs(Eigen::AngleAxisd(t.correction.linear()).axis().dot(up)), 1.0, 1e-9);
+  EXPECT_NEAR((t.correction * centroid - centroid).dot(up), 0.0, 1e-9);
+  const IcpResult free6 = register_points(seen, model);  // all six: the tilt and lift go too
+  ASSERT_TRUE(free6.ok) << free6.why;
+  EXPECT_LT(Eigen::AngleAxisd((free6.correction * plate * tilt).linear()).angle(), 0.05 * kDeg);
+
+  EXPECT_THROW(register_points(seen, model, o, seen), std::invalid_argument);
+}
+
 TEST(Registration, UndoesACameraOrientationErrorThatShearsALineScan) {
   // The sweep axis carries every profile along the same line; a camera tilted by 1° turns each profile about
   // its own laser origin, so over the 80 mm sweep the image is sheared by ±0.7 mm, which no rigid motion
