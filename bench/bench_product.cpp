@@ -4,6 +4,8 @@
 // fuse_model: OpenVDB signed distance, VolumeToMesh), and the model is compared with the true surface:
 //   - model → truth: signed deviation of the model's vertices (mean, RMS, p95, max = one-sided Hausdorff)
 //     and the share within 3 × the precision spec;
+//   - the model's normals against the truth's: the angle between each model vertex's normal (area-weighted
+//     from its triangles) and the normal of the true triangle closest to it, median and 95th percentile;
 //   - truth → model, the seen part: the share of the fine vertices the views measured (verify_images) that
 //     lie within 3 × the precision spec of the model;
 //   - invented surface: model vertices farther than two voxels from every sample;
@@ -12,6 +14,9 @@
 //   bench_product [--meshes DIR] [--threads N] [--csv FILE]
 #include <sys/resource.h>
 
+#include <algorithm>
+#include <cmath>
+#include <tuple>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -24,6 +29,7 @@
 
 #include "planner/config.hpp"
 #include "planner/geometry/scene.hpp"
+#include "planner/geometry/surface_distance.hpp"
 #include "planner/plan.hpp"
 #include "planner/reconstruction/inspection.hpp"
 #include "planner/reconstruction/product.hpp"
@@ -51,8 +57,36 @@ struct Row {
   double mv = 0.0, fuse_s = 0.0, peak_mb = 0.0;
   sp::DeviationStats model;   // model vertices against the truth
   double seen_within = 0.0;   // measured truth vertices within the tolerance of the model
+  double normal_median_deg = 0.0, normal_p95_deg = 0.0;
   std::size_t boundary_edges = 0;
 };
+
+/// Angle (deg) between each model vertex's normal and the closest true triangle's: median and p95.
+std::pair<double, double> normal_error_deg(const sp::TriangleMesh& model, const sp::TriangleMesh& truth) {
+  std::vector<Eigen::Vector3d> vn(model.vertices.size(), Eigen::Vector3d::Zero());
+  for (const auto& t : model.triangles) {
+    const Eigen::Vector3d n = (model.vertices[t[1]] - model.vertices[t[0]]).cross(model.vertices[t[2]] - model.vertices[t[0]]);
+    for (int k = 0; k < 3; ++k) vn[t[k]] += n;  // area-weighted (|n| = twice the area)
+  }
+  const sp::SurfaceIndex index(truth);
+  std::vector<double> angle;
+  angle.reserve(vn.size());
+  for (std::size_t i = 0; i < vn.size(); ++i) {
+    if (vn[i].norm() == 0.0) continue;
+    const sp::Triangle& t = truth.triangles[index.closest(model.vertices[i]).triangle];
+    const Eigen::Vector3d n =
+        (truth.vertices[t[1]] - truth.vertices[t[0]]).cross(truth.vertices[t[2]] - truth.vertices[t[0]]).normalized();
+    angle.push_back(std::acos(std::clamp(vn[i].normalized().dot(n), -1.0, 1.0)) * 180.0 / M_PI);
+  }
+  if (angle.empty()) return {0.0, 0.0};
+  auto rank = [&](double q) {
+    const auto k = static_cast<std::ptrdiff_t>(std::ceil(q * static_cast<double>(angle.size()))) - 1;
+    std::nth_element(angle.begin(), angle.begin() + k, angle.end());
+    return angle[static_cast<std::size_t>(k)];
+  };
+  const double median = rank(0.5);
+  return {median, rank(0.95)};
+}
 
 /// The plan, executed on the truth by the virtual scanner, fused, compared.
 Row run(const std::string& name, const sp::TriangleMesh& truth, const sp::SensorModel& sensor, const sp::ModelSpec& spec,
@@ -88,6 +122,7 @@ Row run(const std::string& name, const sp::TriangleMesh& truth, const sp::Sensor
 
   const double tol = 3.0 * spec.precision_mm;
   r.model = sp::signed_deviation(model.mesh.vertices, truth, tol);
+  std::tie(r.normal_median_deg, r.normal_p95_deg) = normal_error_deg(model.mesh, truth);
   std::vector<Eigen::Vector3d> seen;
   for (std::size_t i = 0; i < truth.vertices.size(); ++i)
     if (v.measured[i]) seen.push_back(truth.vertices[i]);
@@ -127,26 +162,27 @@ int main(int argc, char** argv) {
   std::printf("scancell product benchmark: free-space plan (5000 rough vertices) executed by the virtual scanner (noise, no pose\n"
               "error), fused as a job fuses it, against the truth; 200 mm, thesis sensor and spec (tolerance 3 x %.3f mm), %d threads\n\n",
               spec.precision_mm, threads);
-  std::printf("%-14s %5s %6s %9s %8s %9s %9s %9s %9s %7s %9s %8s %8s %8s %8s\n", "object", "views", "m_v", "samples", "model_v",
-              "mean_mm", "rms_mm", "p95_mm", "max_mm", "in_tol", "seen_tol", "invented", "open_e", "fuse_s", "rss_MB");
+  std::printf("%-14s %5s %6s %9s %8s %9s %9s %9s %9s %7s %9s %8s %8s %8s %8s %8s %8s\n", "object", "views", "m_v", "samples", "model_v",
+              "mean_mm", "rms_mm", "p95_mm", "max_mm", "in_tol", "seen_tol", "n50_deg", "n95_deg", "invented", "open_e", "fuse_s", "rss_MB");
   std::ofstream out;
   if (!csv.empty()) {
     out.open(csv);
     out << "object,views,verified_mv,samples,model_vertices,model_mean_mm,model_rms_mm,model_p95_abs_mm,model_max_abs_mm,"
-           "model_within_tolerance,seen_truth_within_tolerance,invented_vertices,open_edges,fuse_s,process_peak_rss_mb\n";
+           "model_within_tolerance,seen_truth_within_tolerance,normal_error_median_deg,normal_error_p95_deg,invented_vertices,open_edges,fuse_s,process_peak_rss_mb\n";
   }
   for (const auto& f : files) {
     sp::TriangleMesh m = sp::load_mesh(f.string());
     sp::apply_scale(m, sp::fit_scale(m, 200.0));
     const Row r = run(f.stem().string(), m, sensor, spec, settings, threads);
-    std::printf("%-14s %5zu %6.4f %9zu %8zu %+9.4f %9.4f %9.4f %9.4f %7.4f %9.4f %8zu %8zu %8.2f %8.0f\n", r.object.c_str(), r.views,
-                r.mv, r.samples, r.model_vertices, r.model.mean_mm, r.model.rms_mm, r.model.p95_abs_mm, r.model.max_abs_mm,
-                r.model.within_tolerance, r.seen_within, r.invented, r.boundary_edges, r.fuse_s, r.peak_mb);
+    std::printf("%-14s %5zu %6.4f %9zu %8zu %+9.4f %9.4f %9.4f %9.4f %7.4f %9.4f %8.2f %8.2f %8zu %8zu %8.2f %8.0f\n", r.object.c_str(),
+                r.views, r.mv, r.samples, r.model_vertices, r.model.mean_mm, r.model.rms_mm, r.model.p95_abs_mm, r.model.max_abs_mm,
+                r.model.within_tolerance, r.seen_within, r.normal_median_deg, r.normal_p95_deg, r.invented, r.boundary_edges, r.fuse_s,
+                r.peak_mb);
     std::fflush(stdout);
     if (out)
       out << r.object << ',' << r.views << ',' << r.mv << ',' << r.samples << ',' << r.model_vertices << ',' << r.model.mean_mm << ','
           << r.model.rms_mm << ',' << r.model.p95_abs_mm << ',' << r.model.max_abs_mm << ',' << r.model.within_tolerance << ','
-          << r.seen_within << ',' << r.invented << ',' << r.boundary_edges << ',' << r.fuse_s << ',' << r.peak_mb << '\n';
+          << r.seen_within << ',' << r.normal_median_deg << ',' << r.normal_p95_deg << ',' << r.invented << ',' << r.boundary_edges << ',' << r.fuse_s << ',' << r.peak_mb << '\n';
   }
   return 0;
 }

@@ -50,6 +50,23 @@ class SimPose {
   std::uint64_t moves_ = 0;
 };
 
+/// The GenICam driver's profiles with the simulated device's truth joined by trigger counter: the wire
+/// carries ranges only, the simulator knows where each ray hit (SimGigeScanner::take_truth).
+class TruthJoined : public dr::Scanner {
+ public:
+  TruthJoined(dr::Scanner& wire, dr::SimGigeScanner& device) : wire_(wire), device_(device) {}
+  dr::Profile acquire(std::chrono::milliseconds timeout) override {
+    dr::Profile p = wire_.acquire(timeout);
+    if (!p.lost) p.truth = device_.take_truth(p.index);
+    if (p.truth.size() != p.samples.size()) p.truth.clear();  // unknown: the job says its checks were not run
+    return p;
+  }
+
+ private:
+  dr::Scanner& wire_;
+  dr::SimGigeScanner& device_;
+};
+
 class SimHead : public ScanHead {
  public:
   SimHead(const sp::SensorModel& sensor, const sp::TriangleMesh& scene, std::size_t object_triangles, std::uint64_t seed,
@@ -65,8 +82,9 @@ class SimHead : public ScanHead {
       device_ = std::make_unique<dr::SimGigeScanner>(real, scene, now, o);
       // The driver reads the device as it would a real scanner: with the daemon's sensor model.
       driver_ = std::make_unique<dr::GenicamScanner>(sensor, *gige);
+      joined_ = std::make_unique<TruthJoined>(*driver_, *device_);
       trigger_ = device_.get();
-      scanner_ = driver_.get();
+      scanner_ = joined_.get();
     } else {
       sim_ = std::make_unique<dr::SimScanner>(real, scene, now, seed, object_triangles);
       trigger_ = sim_.get();
@@ -83,6 +101,7 @@ class SimHead : public ScanHead {
   std::unique_ptr<dr::SimScanner> sim_;
   std::unique_ptr<dr::SimGigeScanner> device_;  // declared before the driver: the driver closes first
   std::unique_ptr<dr::GenicamScanner> driver_;
+  std::unique_ptr<TruthJoined> joined_;
   dr::DigitalOutput* trigger_ = nullptr;
   dr::Scanner* scanner_ = nullptr;
 };

@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <map>
 
 #include "drivers/axis.hpp"
 #include "drivers/genicam/genicam_xml.hpp"  // generated
@@ -20,6 +21,7 @@ namespace {
 // GigE Vision bootstrap registers (GigE Vision 2.0, table 28-1): the user-defined name, 16 bytes.
 constexpr std::uint32_t kUserNameRegister = 0x00E8, kUserNameSize = 16;
 constexpr std::uint32_t kScaleRegister = 0x1000, kOffsetRegister = 0x1008, kInvalidRegister = 0x1010, kUnitRegister = 0x1018;
+constexpr std::size_t kTruthKept = 100000;  // profiles whose truth is held for the head to take
 
 void write_be_double(ArvFakeCamera* cam, std::uint32_t address, double v) {
   std::uint64_t bits = std::bit_cast<std::uint64_t>(v);
@@ -52,6 +54,7 @@ struct SimGigeScanner::Impl {
   std::deque<Edge> pending;                      // triggered, not yet measured
   std::deque<Line> lines;                        // measured, not yet in a frame
   std::deque<std::vector<std::uint16_t>> frames;  // assembled, waiting for the emulator to send
+  std::map<std::uint64_t, std::vector<planner::SampleTruth>> truth;  // per trigger counter, until taken
   std::chrono::steady_clock::time_point last_edge = std::chrono::steady_clock::now();
   int drop = 0;
   std::uint64_t sent = 0, next_index = 0;
@@ -67,7 +70,7 @@ struct SimGigeScanner::Impl {
     return v;
   }
 
-  Line measure(const Edge& e) {
+  Line measure(const Edge& e, std::vector<planner::SampleTruth>& hit) {
     planner::SensorModel one = sensor;  // one profile: a vanishing sweep, the first of two rows (SimScanner)
     one.samples_y = 2;
     planner::ScanOptions o;
@@ -75,6 +78,8 @@ struct SimGigeScanner::Impl {
     o.object_triangles = options.object_triangles;
     const planner::RangeImage img = planner::virtual_scan(scene, one, {e.pose, 1e-6}, o);
     Line l{e.index, std::vector<std::uint16_t>(static_cast<std::size_t>(img.columns), options.invalid_value)};
+    hit.assign(static_cast<std::size_t>(img.columns), planner::SampleTruth{});
+    if (!img.truth.empty()) std::copy_n(img.truth.begin(), img.columns, hit.begin());  // row 0
     for (int i = 0; i < img.columns; ++i) {
       const planner::RangeSample& s = img.at(i, 0);
       if (!s.valid()) continue;
@@ -112,8 +117,11 @@ struct SimGigeScanner::Impl {
         const Edge e = pending.front();
         pending.pop_front();
         lock.unlock();
-        Line l = measure(e);
+        std::vector<planner::SampleTruth> hit;
+        Line l = measure(e, hit);
         lock.lock();
+        truth[l.index] = std::move(hit);
+        while (truth.size() > kTruthKept) truth.erase(truth.begin());  // never taken (lost on the wire)
         lines.push_back(std::move(l));
       }
       const int width = static_cast<int>(reg(ARV_FAKE_CAMERA_REGISTER_WIDTH));
@@ -236,6 +244,7 @@ void SimGigeScanner::set(bool level) {
       impl_->pending.clear();
       impl_->lines.clear();
       impl_->frames.clear();
+      impl_->truth.clear();
     }
     impl_->pending.push_back({impl_->next_index++, p});
     impl_->last_edge = std::chrono::steady_clock::now();
@@ -246,6 +255,15 @@ void SimGigeScanner::set(bool level) {
 void SimGigeScanner::drop_next_frames(int n) {
   std::lock_guard<std::mutex> lock(impl_->mu);
   impl_->drop += n;
+}
+
+std::vector<planner::SampleTruth> SimGigeScanner::take_truth(std::uint64_t index) {
+  std::lock_guard<std::mutex> lock(impl_->mu);
+  auto it = impl_->truth.find(index);
+  if (it == impl_->truth.end()) return {};
+  std::vector<planner::SampleTruth> t = std::move(it->second);
+  impl_->truth.erase(it);
+  return t;
 }
 
 std::uint64_t SimGigeScanner::frames_sent() const {

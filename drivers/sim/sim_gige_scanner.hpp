@@ -52,6 +52,12 @@ class SimGigeScanner : public DigitalOutput {
   /// The id a GenicamConfig::device can name (the emulator answers discovery as vendor "Aravis").
   std::string address() const { return options_.interface; }
   std::uint64_t frames_sent() const;
+  /// Simulation side data, beside the wire (GigE Vision carries ranges only): what the virtual scanner knew
+  /// of the profile sent with trigger counter `index` (the true hit and its triangle per column), taken once;
+  /// empty when unknown. The daemon's simulated head joins it to the driver's profiles so that a job on the
+  /// GigE path gets the same ground-truth checks as one on the in-process SimScanner; nothing on a real
+  /// scanner's path reads it.
+  std::vector<planner::SampleTruth> take_truth(std::uint64_t index);
 
  private:
   struct Impl;

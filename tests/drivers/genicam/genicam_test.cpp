@@ -72,6 +72,17 @@ TEST(GenicamScanner, ProfilesArriveInTriggerOrderAtTheRangeTheDeviceScaled) {
     ASSERT_FALSE(p.lost);
     ASSERT_EQ(p.samples.size(), static_cast<std::size_t>(cell.sensor.samples_x));
     EXPECT_TRUE(p.truth.empty());  // a device on the wire has no simulation truth
+    // Beside the wire, the simulated device kept it: the true hit of each ray on the plane z = 0, where the
+    // camera stood at this pulse (y = 0.5 k), and it hands it over once.
+    const std::vector<sp::SampleTruth> truth = cell.device->take_truth(p.index);
+    ASSERT_EQ(truth.size(), p.samples.size());
+    for (int i = 0; i < cell.sensor.samples_x; i += 100) {
+      EXPECT_LT(truth[static_cast<std::size_t>(i)].triangle, 2u);
+      EXPECT_NEAR(truth[static_cast<std::size_t>(i)].object_mm.z(), 0.0, 1e-3);
+      EXPECT_NEAR(truth[static_cast<std::size_t>(i)].object_mm.y(), 0.5 * k, 1e-3);
+      EXPECT_NEAR(truth[static_cast<std::size_t>(i)].object_mm.x(), p.samples[static_cast<std::size_t>(i)].camera_mm.x(), 0.05);
+    }
+    EXPECT_TRUE(cell.device->take_truth(p.index).empty());
     double sum = 0.0;
     int n = 0;
     for (int i = 0; i < cell.sensor.samples_x; ++i) {
