@@ -1,6 +1,7 @@
 #include "planner/config.hpp"
 
 #include <cmath>
+#include <limits>
 #include <set>
 #include <sstream>
 
@@ -145,118 +146,119 @@ Countermeasures parse_countermeasures(Section k) {
 
 }  // namespace
 
+namespace {
+
+/// A count given as a YAML number (1e9 reads as a double): whole, within [lo, hi].
+std::uint64_t whole_number(Section& s, const std::string& key, std::uint64_t fallback, double lo, double hi) {
+  if (!s.has(key)) return fallback;
+  const double v = s.get<double>(key);
+  if (!(v >= lo && v <= hi && v == std::floor(v))) {
+    std::ostringstream os;
+    os << "must be a whole number in [" << lo << ", " << hi << "], got " << v;
+    s.fail(s.key_path(key), os.str());
+  }
+  return static_cast<std::uint64_t>(v);
+}
+
+/// A positive limit in (0, hi]: 0 would mean "no time at all", not "no limit".
+double positive_up_to(Section& s, const std::string& key, double fallback, double hi) {
+  const double v = s.get_or<double>(key, fallback);
+  if (!(v > 0.0 && v <= hi)) {
+    std::ostringstream os;
+    os << "must be in (0, " << hi << "], got " << v;
+    s.fail(s.key_path(key), os.str());
+  }
+  return v;
+}
+
+void read_viewpoints(Section v, ViewpointSettings& vs) {
+  const std::string scheme = v.get_or<std::string>("scheme", to_string(vs.scheme));
+  if (scheme == "variable") vs.scheme = ViewpointScheme::variable;
+  else if (scheme == "decoupled") vs.scheme = ViewpointScheme::decoupled;
+  else v.fail(v.key_path("scheme"), "must be variable or decoupled, got '" + scheme + "'");
+  vs.standoff_factor = v.ranged("standoff_factor", vs.standoff_factor, 1.0, 2.0);
+  vs.position_decimation = v.ranged("position_decimation", vs.position_decimation, 1, std::numeric_limits<int>::max());
+  vs.min_position_spacing_fraction = v.ranged("min_position_spacing_fraction", vs.min_position_spacing_fraction, 0.0, 1.0);
+  vs.free_space_min_position_spacing_fraction =
+      v.ranged("free_space_min_position_spacing_fraction", vs.free_space_min_position_spacing_fraction, 0.0, 1.0);
+  vs.twist_levels = v.ranged("twist_levels", vs.twist_levels, 1, 360);
+  vs.standoff_adjust_max_mm = v.non_negative("standoff_adjust_max_mm", vs.standoff_adjust_max_mm);
+  vs.scan_length_design_incidence_rad = v.non_negative("scan_length_design_incidence_rad", vs.scan_length_design_incidence_rad);
+  if (!(vs.scan_length_design_incidence_rad < 1.5)) v.fail(v.key_path("scan_length_design_incidence_rad"), "must be < 1.5");
+  vs.clearance_mm = v.non_negative("clearance_mm", vs.clearance_mm);
+  vs.bisector_tilt = v.get_or<bool>("bisector_tilt", vs.bisector_tilt);
+  vs.open_direction_views = v.get_or<bool>("open_direction_views", vs.open_direction_views);
+  vs.open_direction_standoffs = v.ranged("open_direction_standoffs", vs.open_direction_standoffs, 1, 16);
+  vs.open_directions_per_row = v.ranged("open_directions_per_row", vs.open_directions_per_row, 1, 64);
+  vs.cell_native = v.get_or<bool>("cell_native", vs.cell_native);
+  vs.cell_oblique_rad = v.ranged("cell_oblique_rad", vs.cell_oblique_rad, 0.0, 0.8);
+  vs.cell_standoff_steps = v.ranged("cell_standoff_steps", vs.cell_standoff_steps, 1, 8);
+  v.finish();
+}
+
+void read_cover(Section c, CoverSettings& cs) {
+  const std::string mode = c.get_or<std::string>("mode", to_string(cs.mode));
+  if (mode == "greedy") cs.mode = CoverMode::greedy;
+  else if (mode == "constrained") cs.mode = CoverMode::constrained;
+  else if (mode == "exact") cs.mode = CoverMode::exact;
+  else c.fail(c.key_path("mode"), "must be greedy, constrained or exact, got '" + mode + "'");
+  cs.registration_threshold = c.ranged("registration_threshold", cs.registration_threshold, 0.0, 1.0);
+  const std::string norm = c.get_or<std::string>("registration_normalizer", to_string(cs.normalizer));
+  if (norm == "max_view") cs.normalizer = RegistrationNormalizer::max_view;
+  else if (norm == "smaller_view") cs.normalizer = RegistrationNormalizer::smaller_view;
+  else c.fail(c.key_path("registration_normalizer"), "must be max_view or smaller_view, got '" + norm + "'");
+  cs.eliminate_redundant = c.get_or<bool>("eliminate_redundant", cs.eliminate_redundant);
+  cs.exact_time_limit_s = positive_up_to(c, "exact_time_limit_s", cs.exact_time_limit_s, 86400.0);
+  cs.min_view_gain = c.non_negative("min_view_gain_mm2", cs.min_view_gain);
+  cs.local_search_iterations = whole_number(c, "local_search_iterations", cs.local_search_iterations, 0.0, 1e9);
+  cs.local_search_stall_work = whole_number(c, "local_search_stall_work", cs.local_search_stall_work, 1.0, 1e15);
+  cs.local_search_time_limit_s = positive_up_to(c, "local_search_time_limit_s", cs.local_search_time_limit_s, 3600.0);
+  c.finish();
+}
+
+void read_placement(Section s, PlacementSettings& pl) {
+  using L = PlacementSettings;
+  const std::string mode = s.get_or<std::string>("mode", pl.automatic ? "auto" : "as_given");
+  if (mode == "auto") pl.automatic = true;
+  else if (mode == "as_given") pl.automatic = false;
+  else s.fail(s.key_path("mode"), "must be auto or as_given, got '" + mode + "'");
+  pl.candidates = s.ranged<int>("candidates", pl.candidates, static_cast<int>(L::candidates_limits.lo),
+                                static_cast<int>(L::candidates_limits.hi));
+  pl.min_probability = s.ranged("min_probability", pl.min_probability, L::min_probability_limits.lo, L::min_probability_limits.hi);
+  pl.min_tip_angle_rad = s.ranged("min_tip_angle_rad", pl.min_tip_angle_rad, L::min_tip_angle_limits.lo, L::min_tip_angle_limits.hi);
+  pl.coverage_tolerance =
+      s.ranged("coverage_tolerance", pl.coverage_tolerance, L::coverage_tolerance_limits.lo, L::coverage_tolerance_limits.hi);
+  s.finish();
+}
+
+void read_matrix(Section m, PlannerSettings& p) {
+  p.matrix.ray_offset_mm = m.non_negative("ray_offset_mm", p.matrix.ray_offset_mm);
+  if (m.has("countermeasures")) {
+    const YAML::Node n = m.raw("countermeasures");
+    if (n.IsScalar()) {
+      const std::string v = n.Scalar();
+      if (v == "auto") p.countermeasures_from_cell = true;
+      else if (v == "none") p.countermeasures_from_cell = false;
+      else m.fail(m.key_path("countermeasures"), "must be auto, none or a mapping, got '" + v + "'");
+    } else {
+      p.matrix.countermeasures = parse_countermeasures(m.section("countermeasures"));
+    }
+  }
+  if (m.has("free_space_countermeasures")) p.free_space_countermeasures = parse_countermeasures(m.section("free_space_countermeasures"));
+  m.finish();
+}
+
+}  // namespace
+
 PlannerSettings load_planner_settings(const std::filesystem::path& file) {
   YAML::Node root;
   Section y = open_root(file, root);
   PlannerSettings p;
   p.seed = y.get_or<std::uint64_t>("seed", p.seed);
-  if (y.has("viewpoints")) {
-    Section v = y.section("viewpoints");
-    auto& vs = p.viewpoints;
-    const std::string scheme = v.get_or<std::string>("scheme", to_string(vs.scheme));
-    if (scheme == "variable") vs.scheme = ViewpointScheme::variable;
-    else if (scheme == "decoupled") vs.scheme = ViewpointScheme::decoupled;
-    else v.fail(v.key_path("scheme"), "must be variable or decoupled, got '" + scheme + "'");
-    vs.standoff_factor = v.get_or<double>("standoff_factor", vs.standoff_factor);
-    if (!(vs.standoff_factor >= 1.0 && vs.standoff_factor <= 2.0)) v.fail(v.key_path("standoff_factor"), "must be in [1, 2]");
-    vs.position_decimation = v.get_or<int>("position_decimation", vs.position_decimation);
-    if (vs.position_decimation < 1) v.fail(v.key_path("position_decimation"), "must be >= 1");
-    vs.min_position_spacing_fraction = v.get_or<double>("min_position_spacing_fraction", vs.min_position_spacing_fraction);
-    if (!(vs.min_position_spacing_fraction >= 0.0 && vs.min_position_spacing_fraction <= 1.0))
-      v.fail(v.key_path("min_position_spacing_fraction"), "must be in [0, 1], got " + std::to_string(vs.min_position_spacing_fraction));
-    vs.free_space_min_position_spacing_fraction =
-        v.get_or<double>("free_space_min_position_spacing_fraction", vs.free_space_min_position_spacing_fraction);
-    if (!(vs.free_space_min_position_spacing_fraction >= 0.0 && vs.free_space_min_position_spacing_fraction <= 1.0))
-      v.fail(v.key_path("free_space_min_position_spacing_fraction"),
-             "must be in [0, 1], got " + std::to_string(vs.free_space_min_position_spacing_fraction));
-    vs.twist_levels = v.get_or<int>("twist_levels", vs.twist_levels);
-    if (vs.twist_levels < 1 || vs.twist_levels > 360) v.fail(v.key_path("twist_levels"), "must be in [1, 360]");
-    vs.standoff_adjust_max_mm = v.non_negative("standoff_adjust_max_mm", vs.standoff_adjust_max_mm);
-    vs.scan_length_design_incidence_rad = v.non_negative("scan_length_design_incidence_rad", vs.scan_length_design_incidence_rad);
-    if (!(vs.scan_length_design_incidence_rad < 1.5)) v.fail(v.key_path("scan_length_design_incidence_rad"), "must be < 1.5");
-    vs.clearance_mm = v.non_negative("clearance_mm", vs.clearance_mm);
-    vs.bisector_tilt = v.get_or<bool>("bisector_tilt", vs.bisector_tilt);
-    vs.open_direction_views = v.get_or<bool>("open_direction_views", vs.open_direction_views);
-    vs.open_direction_standoffs = v.get_or<int>("open_direction_standoffs", vs.open_direction_standoffs);
-    if (vs.open_direction_standoffs < 1 || vs.open_direction_standoffs > 16) v.fail(v.key_path("open_direction_standoffs"), "must be in [1, 16]");
-    vs.open_directions_per_row = v.get_or<int>("open_directions_per_row", vs.open_directions_per_row);
-    if (vs.open_directions_per_row < 1 || vs.open_directions_per_row > 64) v.fail(v.key_path("open_directions_per_row"), "must be in [1, 64]");
-    vs.cell_native = v.get_or<bool>("cell_native", vs.cell_native);
-    vs.cell_oblique_rad = v.get_or<double>("cell_oblique_rad", vs.cell_oblique_rad);
-    if (!(vs.cell_oblique_rad >= 0.0 && vs.cell_oblique_rad <= 0.8)) v.fail(v.key_path("cell_oblique_rad"), "must be in [0, 0.8]");
-    vs.cell_standoff_steps = v.get_or<int>("cell_standoff_steps", vs.cell_standoff_steps);
-    if (vs.cell_standoff_steps < 1 || vs.cell_standoff_steps > 8) v.fail(v.key_path("cell_standoff_steps"), "must be in [1, 8]");
-    v.finish();
-  }
-  if (y.has("cover")) {
-    Section c = y.section("cover");
-    const std::string mode = c.get_or<std::string>("mode", to_string(p.cover.mode));
-    if (mode == "greedy") p.cover.mode = CoverMode::greedy;
-    else if (mode == "constrained") p.cover.mode = CoverMode::constrained;
-    else if (mode == "exact") p.cover.mode = CoverMode::exact;
-    else c.fail(c.key_path("mode"), "must be greedy, constrained or exact, got '" + mode + "'");
-    p.cover.registration_threshold = c.non_negative("registration_threshold", p.cover.registration_threshold);
-    if (!(p.cover.registration_threshold <= 1.0)) c.fail(c.key_path("registration_threshold"), "must be in [0, 1]");
-    const std::string norm = c.get_or<std::string>("registration_normalizer", to_string(p.cover.normalizer));
-    if (norm == "max_view") p.cover.normalizer = RegistrationNormalizer::max_view;
-    else if (norm == "smaller_view") p.cover.normalizer = RegistrationNormalizer::smaller_view;
-    else c.fail(c.key_path("registration_normalizer"), "must be max_view or smaller_view, got '" + norm + "'");
-    p.cover.eliminate_redundant = c.get_or<bool>("eliminate_redundant", p.cover.eliminate_redundant);
-    p.cover.exact_time_limit_s = c.get_or<double>("exact_time_limit_s", p.cover.exact_time_limit_s);
-    if (!(p.cover.exact_time_limit_s > 0.0 && p.cover.exact_time_limit_s <= 86400.0))
-      c.fail(c.key_path("exact_time_limit_s"), "must be in (0, 86400]");
-    p.cover.min_view_gain = c.non_negative("min_view_gain_mm2", p.cover.min_view_gain);
-    if (c.has("local_search_iterations")) {
-      const double it = c.get<double>("local_search_iterations");
-      if (!(it >= 0.0 && it <= 1e9 && it == std::floor(it)))
-        c.fail(c.key_path("local_search_iterations"), "must be a whole number in [0, 1e9], got " + std::to_string(it));
-      p.cover.local_search_iterations = static_cast<std::uint64_t>(it);
-    }
-    if (c.has("local_search_stall_work")) {
-      const double it = c.get<double>("local_search_stall_work");
-      if (!(it >= 1.0 && it <= 1e15 && it == std::floor(it)))
-        c.fail(c.key_path("local_search_stall_work"), "must be a whole number in [1, 1e15], got " + std::to_string(it));
-      p.cover.local_search_stall_work = static_cast<std::uint64_t>(it);
-    }
-    p.cover.local_search_time_limit_s = c.get_or<double>("local_search_time_limit_s", p.cover.local_search_time_limit_s);
-    if (!(p.cover.local_search_time_limit_s > 0.0 && p.cover.local_search_time_limit_s <= 3600.0))
-      c.fail(c.key_path("local_search_time_limit_s"), "must be in (0, 3600]");
-    c.finish();
-  }
-  if (y.has("placement")) {
-    Section s = y.section("placement");
-    auto& pl = p.placement;
-    using L = PlacementSettings;
-    const std::string mode = s.get_or<std::string>("mode", pl.automatic ? "auto" : "as_given");
-    if (mode == "auto") pl.automatic = true;
-    else if (mode == "as_given") pl.automatic = false;
-    else s.fail(s.key_path("mode"), "must be auto or as_given, got '" + mode + "'");
-    pl.candidates = s.ranged<int>("candidates", pl.candidates, static_cast<int>(L::candidates_limits.lo),
-                                  static_cast<int>(L::candidates_limits.hi));
-    pl.min_probability = s.ranged("min_probability", pl.min_probability, L::min_probability_limits.lo, L::min_probability_limits.hi);
-    pl.min_tip_angle_rad = s.ranged("min_tip_angle_rad", pl.min_tip_angle_rad, L::min_tip_angle_limits.lo, L::min_tip_angle_limits.hi);
-    pl.coverage_tolerance =
-        s.ranged("coverage_tolerance", pl.coverage_tolerance, L::coverage_tolerance_limits.lo, L::coverage_tolerance_limits.hi);
-    s.finish();
-  }
-  if (y.has("matrix")) {
-    Section m = y.section("matrix");
-    p.matrix.ray_offset_mm = m.non_negative("ray_offset_mm", p.matrix.ray_offset_mm);
-    if (m.has("countermeasures")) {
-      const YAML::Node n = m.raw("countermeasures");
-      if (n.IsScalar()) {
-        const std::string v = n.Scalar();
-        if (v == "auto") p.countermeasures_from_cell = true;
-        else if (v == "none") p.countermeasures_from_cell = false;
-        else m.fail(m.key_path("countermeasures"), "must be auto, none or a mapping, got '" + v + "'");
-      } else {
-        p.matrix.countermeasures = parse_countermeasures(m.section("countermeasures"));
-      }
-    }
-    if (m.has("free_space_countermeasures"))
-      p.free_space_countermeasures = parse_countermeasures(m.section("free_space_countermeasures"));
-    m.finish();
-  }
+  if (y.has("viewpoints")) read_viewpoints(y.section("viewpoints"), p.viewpoints);
+  if (y.has("cover")) read_cover(y.section("cover"), p.cover);
+  if (y.has("placement")) read_placement(y.section("placement"), p.placement);
+  if (y.has("matrix")) read_matrix(y.section("matrix"), p);
   y.finish();
   return p;
 }
