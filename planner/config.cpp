@@ -298,6 +298,90 @@ JointVector CellModel::home() const {
   return q;
 }
 
+namespace {
+
+/// One axis of the cell: type, limits in the type's unit (_rad or _mm), speed, acceleration and home.
+Axis read_axis(Section a, const std::string& name) {
+  Axis ax;
+  ax.name = name;
+  const std::string type = a.get<std::string>("type");
+  if (type == "rotary") ax.type = AxisType::rotary;
+  else if (type == "linear") ax.type = AxisType::linear;
+  else a.fail(a.key_path("type"), "must be rotary or linear, got '" + type + "'");
+  const bool rot = ax.type == AxisType::rotary;
+  const std::string u = rot ? "_rad" : "_mm";
+  ax.min = a.get<double>("min" + u);
+  ax.max = a.get<double>("max" + u);
+  if (!(ax.min < ax.max)) a.fail(a.key_path("max" + u), "must be greater than min" + u);
+  ax.max_speed = a.positive(rot ? "max_speed_rad_s" : "max_speed_mm_s");
+  ax.max_accel = a.positive(rot ? "max_accel_rad_s2" : "max_accel_mm_s2");
+  ax.home = a.get_or<double>("home" + u, std::clamp(0.0, ax.min, ax.max));
+  if (!(ax.home >= ax.min && ax.home <= ax.max)) a.fail(a.key_path("home" + u), "must lie within the limits");
+  a.finish();
+  return ax;
+}
+
+/// The axes the kinematics names, each once, and no other.
+void read_axes(Section axes, const std::string& kin, const std::vector<std::string>& names, CellModel& c) {
+  for (const auto& n : names) {
+    if (!axes.has(n)) axes.fail(axes.key_path(n), "missing (" + kin + " needs " + std::to_string(names.size()) + " axes)");
+    c.axes.push_back(read_axis(axes.section(n), n));
+  }
+  for (const auto& k : axes.keys())
+    if (std::find(names.begin(), names.end(), k) == names.end()) axes.fail(axes.key_path(k), "unknown axis for " + kin);
+}
+
+void read_table_axis(Section t, CellModel& c) {
+  c.table_axis_point_mm = t.vec3("point_mm");
+  const Eigen::Vector3d d = t.vec3("direction");
+  if (!(d.norm() > 0.0) || d.normalized().z() < std::cos(0.1))
+    t.fail(t.key_path("direction"), "must be within 0.1 rad of world +Z (a turntable's axis), got a vector off by more");
+  c.table_axis_direction = d.normalized();
+  t.finish();
+}
+
+void read_fixtures(Section& y, const std::filesystem::path& file, CellModel& c) {
+  const YAML::Node list = y.raw("fixtures");
+  if (!list.IsSequence()) y.fail("fixtures", "must be a list");
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    Section f(list[i], file.string(), "fixtures[" + std::to_string(i) + "]");
+    Fixture fx;
+    fx.name = f.get<std::string>("name");
+    const std::string frame = f.get<std::string>("frame");
+    if (frame == "table") fx.on_table = true;
+    else f.fail(f.key_path("frame"), "must be table (fixtures that turn with the object; world-fixed ones are not supported yet), got '" + frame + "'");
+    fx.box = Box{f.vec3("min_mm"), f.vec3("max_mm")};
+    if (!(fx.box.min.array() < fx.box.max.array()).all()) f.fail(f.key_path("max_mm"), "must exceed min_mm on every axis");
+    f.finish();
+    c.fixtures.push_back(fx);
+  }
+}
+
+/// The arm's base, tool and six Denavit-Hartenberg rows [a_mm, alpha_rad, d_mm, theta_offset_rad].
+void read_arm(Section arm, CellModel& c) {
+  c.arm_base = pose_from(arm, "base_mm", "base_rpy_rad");
+  c.tool = pose_from(arm, "tool_mm", "tool_rpy_rad");
+  const YAML::Node dh = arm.raw("dh");
+  if (!dh || !dh.IsSequence() || dh.size() != 6) arm.fail(arm.key_path("dh"), "must list 6 joints [a_mm, alpha_rad, d_mm, theta_offset_rad]");
+  for (std::size_t i = 0; i < 6; ++i) {
+    const std::string key = arm.key_path("dh[" + std::to_string(i) + "]");
+    if (!dh[i].IsSequence() || dh[i].size() != 4) arm.fail(key, "must be 4 numbers");
+    std::array<double, 4> row{};
+    for (int k = 0; k < 4; ++k) {
+      try {
+        row[k] = dh[i][k].as<double>();
+      } catch (const YAML::Exception&) {
+        arm.fail(key, "element " + std::to_string(k) + " is not a number");
+      }
+      if (!std::isfinite(row[k])) arm.fail(key, "must be finite");
+    }
+    c.dh.push_back(row);
+  }
+  arm.finish();
+}
+
+}  // namespace
+
 CellModel load_cell(const std::filesystem::path& file) {
   YAML::Node root;
   Section y = open_root(file, root);
@@ -314,64 +398,15 @@ CellModel load_cell(const std::filesystem::path& file) {
   } else {
     y.fail("kinematics", "must be turntable_lift_tilt or arm_turntable, got '" + kin + "'");
   }
-  {
-    Section axes = y.section("axes");
-    for (const auto& n : names) {
-      if (!axes.has(n)) axes.fail(axes.key_path(n), "missing (" + kin + " needs " + std::to_string(names.size()) + " axes)");
-      Section a = axes.section(n);
-      Axis ax;
-      ax.name = n;
-      const std::string type = a.get<std::string>("type");
-      if (type == "rotary") ax.type = AxisType::rotary;
-      else if (type == "linear") ax.type = AxisType::linear;
-      else a.fail(a.key_path("type"), "must be rotary or linear, got '" + type + "'");
-      const bool rot = ax.type == AxisType::rotary;
-      const std::string u = rot ? "_rad" : "_mm";
-      ax.min = a.get<double>("min" + u);
-      ax.max = a.get<double>("max" + u);
-      if (!(ax.min < ax.max)) a.fail(a.key_path("max" + u), "must be greater than min" + u);
-      ax.max_speed = a.positive(rot ? "max_speed_rad_s" : "max_speed_mm_s");
-      ax.max_accel = a.positive(rot ? "max_accel_rad_s2" : "max_accel_mm_s2");
-      ax.home = a.get_or<double>("home" + u, std::clamp(0.0, ax.min, ax.max));
-      if (!(ax.home >= ax.min && ax.home <= ax.max)) a.fail(a.key_path("home" + u), "must lie within the limits");
-      a.finish();
-      c.axes.push_back(ax);
-    }
-    for (const auto& k : axes.keys())
-      if (std::find(names.begin(), names.end(), k) == names.end())
-        axes.fail(axes.key_path(k), "unknown axis for " + kin);
-  }
+  read_axes(y.section("axes"), kin, names, c);
   c.object_on_table = pose_from(y, "object_offset_mm", "object_rpy_rad");
   if (y.has("camera_offset_mm")) c.camera_offset_mm = y.vec3("camera_offset_mm");
-  if (y.has("table_axis")) {
-    Section t = y.section("table_axis");
-    c.table_axis_point_mm = t.vec3("point_mm");
-    const Eigen::Vector3d d = t.vec3("direction");
-    if (!(d.norm() > 0.0) || d.normalized().z() < std::cos(0.1))
-      t.fail(t.key_path("direction"), "must be within 0.1 rad of world +Z (a turntable's axis), got a vector off by more");
-    c.table_axis_direction = d.normalized();
-    t.finish();
-  }
+  if (y.has("table_axis")) read_table_axis(y.section("table_axis"), c);
   {
     Section b = y.section("scanner_body");
     c.scanner_body = box_from(b);
   }
-  if (y.has("fixtures")) {
-    const YAML::Node list = y.raw("fixtures");
-    if (!list.IsSequence()) y.fail("fixtures", "must be a list");
-    for (std::size_t i = 0; i < list.size(); ++i) {
-      Section f(list[i], file.string(), "fixtures[" + std::to_string(i) + "]");
-      Fixture fx;
-      fx.name = f.get<std::string>("name");
-      const std::string frame = f.get<std::string>("frame");
-      if (frame == "table") fx.on_table = true;
-      else f.fail(f.key_path("frame"), "must be table (fixtures that turn with the object; world-fixed ones are not supported yet), got '" + frame + "'");
-      fx.box = Box{f.vec3("min_mm"), f.vec3("max_mm")};
-      if (!(fx.box.min.array() < fx.box.max.array()).all()) f.fail(f.key_path("max_mm"), "must exceed min_mm on every axis");
-      f.finish();
-      c.fixtures.push_back(fx);
-    }
-  }
+  if (y.has("fixtures")) read_fixtures(y, file, c);
   c.clearance_mm = y.non_negative("clearance_mm", c.clearance_mm);
   c.scan_speed_mm_s = y.get_or<double>("scan_speed_mm_s", c.scan_speed_mm_s);
   if (!(c.scan_speed_mm_s > 0.0)) y.fail("scan_speed_mm_s", "must be > 0");
@@ -382,27 +417,7 @@ CellModel load_cell(const std::filesystem::path& file) {
     c.pose_error.sigma_t_rad = p.non_negative("sigma_t_rad", 0.0);
     p.finish();
   }
-  if (c.kinematics == CellKinematics::arm_turntable) {
-    Section arm = y.section("arm");
-    c.arm_base = pose_from(arm, "base_mm", "base_rpy_rad");
-    c.tool = pose_from(arm, "tool_mm", "tool_rpy_rad");
-    const YAML::Node dh = arm.raw("dh");
-    if (!dh || !dh.IsSequence() || dh.size() != 6) arm.fail(arm.key_path("dh"), "must list 6 joints [a_mm, alpha_rad, d_mm, theta_offset_rad]");
-    for (std::size_t i = 0; i < 6; ++i) {
-      if (!dh[i].IsSequence() || dh[i].size() != 4) arm.fail(arm.key_path("dh[" + std::to_string(i) + "]"), "must be 4 numbers");
-      std::array<double, 4> row{};
-      for (int k = 0; k < 4; ++k) {
-        try {
-          row[k] = dh[i][k].as<double>();
-        } catch (const YAML::Exception&) {
-          arm.fail(arm.key_path("dh[" + std::to_string(i) + "]"), "element " + std::to_string(k) + " is not a number");
-        }
-        if (!std::isfinite(row[k])) arm.fail(arm.key_path("dh[" + std::to_string(i) + "]"), "must be finite");
-      }
-      c.dh.push_back(row);
-    }
-    arm.finish();
-  }
+  if (c.kinematics == CellKinematics::arm_turntable) read_arm(y.section("arm"), c);
   y.finish();
   return c;
 }
