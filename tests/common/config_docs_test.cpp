@@ -1,5 +1,9 @@
 // Every key of every shipped configuration file is documented: named in docs/*.md or the README (issue 17: a
-// parameter's default, range and meaning were in three places and some were in none).
+// parameter's default, range and meaning were in three places and some were in none), and the planner's and
+// sensor's key tables state what the shipped files hold.
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <regex>
@@ -66,6 +70,80 @@ TEST(ConfigDocs, EveryShippedKeyIsNamedInTheDocs) {
     EXPECT_TRUE(missing.empty()) << fs::relative(f, src).string() << ": keys no document names:" << list;
   }
   EXPECT_GT(checked, 300u);
+}
+
+/// The node at a dotted key path, or an undefined node.
+YAML::Node at_path(const YAML::Node& root, const std::string& path) {
+  YAML::Node n = YAML::Clone(root);
+  std::stringstream ss(path);
+  std::string part;
+  while (std::getline(ss, part, '.')) {
+    if (!n.IsMap() || !n[part]) return YAML::Node(YAML::NodeType::Undefined);
+    n.reset(n[part]);  // rebind; `n = n[part]` would assign into the tree
+  }
+  return n;
+}
+
+bool same_value(const std::string& a, const std::string& b) {
+  char *ea = nullptr, *eb = nullptr;
+  const double x = std::strtod(a.c_str(), &ea), y = std::strtod(b.c_str(), &eb);
+  if (!a.empty() && !b.empty() && *ea == '\0' && *eb == '\0') return std::abs(x - y) <= 1e-12 * std::max(1.0, std::abs(x));
+  return a == b;
+}
+
+std::string trim(const std::string& s) {
+  const auto b = s.find_first_not_of(' '), e = s.find_last_not_of(' ');
+  return b == std::string::npos ? "" : s.substr(b, e - b + 1);
+}
+
+/// The key table that follows the line naming `file` in `doc`: its `shipped` column must be what the file
+/// ships, and every key the file has must have a row (issue 17: a default documented once, checked here).
+void expect_table_matches(const std::string& doc, const std::string& heading, const fs::path& file) {
+  const YAML::Node y = YAML::LoadFile(file.string());
+  std::stringstream in(doc);
+  std::string line;
+  bool found = false, in_table = false;
+  std::set<std::string> rows;
+  while (std::getline(in, line)) {
+    if (!found) {
+      found = line.find(heading) != std::string::npos;
+      continue;
+    }
+    if (line.rfind("| `", 0) != 0) {
+      if (in_table) break;
+      continue;
+    }
+    in_table = true;
+    const auto k0 = line.find('`'), k1 = line.find('`', k0 + 1);
+    const std::string key = line.substr(k0 + 1, k1 - k0 - 1);
+    const auto c1 = line.find('|', k1), c2 = line.find('|', c1 + 1);
+    const std::string shipped = trim(line.substr(c1 + 1, c2 - c1 - 1));
+    rows.insert(key);
+    const YAML::Node n = at_path(y, key);
+    ASSERT_TRUE(n.IsDefined()) << heading << ": row `" << key << "` names no key of " << file.filename();
+    if (shipped.empty()) {
+      EXPECT_TRUE(n.IsMap()) << heading << ": `" << key << "` has no shipped value in the docs but one in the file";
+    } else {
+      ASSERT_TRUE(n.IsScalar()) << heading << ": `" << key << "` is not a value in " << file.filename();
+      EXPECT_TRUE(same_value(shipped, n.Scalar())) << heading << ": `" << key << "` documented as " << shipped << ", shipped as "
+                                                   << n.Scalar();
+    }
+  }
+  ASSERT_TRUE(found) << "no line names " << heading;
+  std::vector<std::string> paths;
+  key_paths(y, "", false, paths);
+  for (const auto& p : paths) {
+    if (!at_path(y, p).IsScalar()) continue;  // a section: its keys have the rows
+    EXPECT_TRUE(rows.count(p)) << heading << ": key " << p << " has no row";
+  }
+  EXPECT_GT(rows.size(), 10u);
+}
+
+TEST(ConfigDocs, TheShippedColumnIsWhatTheFileShips) {
+  const fs::path src = SCANCELL_SOURCE_DIR;
+  const std::string planner = read(src / "docs" / "planner.md");
+  expect_table_matches(planner, "Planner settings, `config/planner/default.yaml`", src / "config" / "planner" / "default.yaml");
+  expect_table_matches(planner, "Sensor, `config/sensors/line-scan-thesis.yaml`", src / "config" / "sensors" / "line-scan-thesis.yaml");
 }
 
 }  // namespace
