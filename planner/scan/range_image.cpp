@@ -161,109 +161,144 @@ RangeImage load_range_image(const std::filesystem::path& path) {
   return range_image_from_ply(data, path.string());
 }
 
-RangeImage range_image_from_ply(const std::string& data, const std::string& name) {
-  auto fail = [&](const std::string& why) -> void { throw DataError(name + ": " + why); };
-  const std::size_t end = data.find("end_header\n");
-  if (data.rfind("ply\n", 0) != 0 || end == std::string::npos) fail("not a PLY file (no 'ply' / 'end_header')");
+namespace {
+
+[[noreturn]] void refuse(const std::string& name, const std::string& why) { throw DataError(name + ": " + why); }
+
+/// What the header said, for the checks after it.
+struct RangeHeader {
+  bool kind = false, cols = false, rows = false, len = false, pose = false, tag = false, count_given = false;
+  std::size_t count = 0, properties = 0;
+};
+
+/// One `comment` line: the format tag, kind, columns, rows, scan length or pose, into `img`.
+void read_comment(std::istringstream& ls, const std::string& line, const std::string& where, const std::string& name, RangeImage& img,
+                  RangeHeader& h) {
+  std::string w1;
+  ls >> w1;
+  if (w1 == "scancell") {
+    h.tag = line == "comment scancell range image 1";
+    if (!h.tag) refuse(name, where + ": unsupported version");
+  } else if (w1 == "kind") {
+    std::string k;
+    ls >> k;
+    if (k == "line_scan") img.kind = SensorKind::line_scan;
+    else if (k == "random_access") img.kind = SensorKind::random_access;
+    else refuse(name, where + ": unknown kind");
+    h.kind = true;
+  } else if (w1 == "columns") {
+    h.cols = static_cast<bool>(ls >> img.columns) && img.columns >= 2 && img.columns <= 1 << 16;
+    if (!h.cols) refuse(name, where + ": columns must be in [2, 65536]");
+  } else if (w1 == "rows") {
+    h.rows = static_cast<bool>(ls >> img.rows) && img.rows >= 2 && img.rows <= 1 << 16;
+    if (!h.rows) refuse(name, where + ": rows must be in [2, 65536]");
+  } else if (w1 == "scan_length_mm") {
+    h.len = static_cast<bool>(ls >> img.pose.scan_length_mm) && std::isfinite(img.pose.scan_length_mm) && img.pose.scan_length_mm >= 0.0;
+    if (!h.len) refuse(name, where + ": bad scan length");
+  } else if (w1 == "camera_to_object") {
+    Eigen::Matrix4d m;
+    for (int r = 0; r < 4; ++r)
+      for (int c = 0; c < 4; ++c)
+        if (!(ls >> m(r, c)) || !std::isfinite(m(r, c))) refuse(name, where + ": needs 16 finite numbers");
+    const Eigen::Matrix3d rot = m.topLeftCorner<3, 3>();
+    if (!(rot.transpose() * rot).isApprox(Eigen::Matrix3d::Identity(), 1e-6) || rot.determinant() < 0.0)
+      refuse(name, where + ": rotation part is not a rotation");
+    img.pose.camera_to_object.matrix() = m;
+    h.pose = true;
+  }
+}
+
+/// The header (up to `end`) into `img`; refused when a line or a required item is wrong or missing.
+RangeHeader read_header(const std::string& data, std::size_t end, const std::string& name, RangeImage& img) {
   std::istringstream header(data.substr(0, end));
   std::string line;
-  RangeImage img;
-  bool have_kind = false, have_cols = false, have_rows = false, have_len = false, have_pose = false, have_tag = false;
-  std::size_t count = 0, prop = 0, line_no = 0;
-  bool have_count = false;
+  RangeHeader h;
+  std::size_t line_no = 0;
   while (std::getline(header, line)) {
     ++line_no;
     const std::string where = "header line " + std::to_string(line_no) + " '" + line + "'";
     std::istringstream ls(line);
-    std::string w0, w1;
+    std::string w0;
     ls >> w0;
     if (line_no == 1) continue;
     if (line_no == 2) {
-      if (line != "format binary_little_endian 1.0") fail(where + ": expected binary_little_endian 1.0");
+      if (line != "format binary_little_endian 1.0") refuse(name, where + ": expected binary_little_endian 1.0");
       continue;
     }
     if (w0 == "comment") {
-      ls >> w1;
-      if (w1 == "scancell") { have_tag = line == "comment scancell range image 1"; if (!have_tag) fail(where + ": unsupported version"); }
-      else if (w1 == "kind") {
-        std::string k;
-        ls >> k;
-        if (k == "line_scan") img.kind = SensorKind::line_scan;
-        else if (k == "random_access") img.kind = SensorKind::random_access;
-        else fail(where + ": unknown kind");
-        have_kind = true;
-      } else if (w1 == "columns") { have_cols = static_cast<bool>(ls >> img.columns) && img.columns >= 2 && img.columns <= 1 << 16; if (!have_cols) fail(where + ": columns must be in [2, 65536]"); }
-      else if (w1 == "rows") { have_rows = static_cast<bool>(ls >> img.rows) && img.rows >= 2 && img.rows <= 1 << 16; if (!have_rows) fail(where + ": rows must be in [2, 65536]"); }
-      else if (w1 == "scan_length_mm") { have_len = static_cast<bool>(ls >> img.pose.scan_length_mm) && std::isfinite(img.pose.scan_length_mm) && img.pose.scan_length_mm >= 0.0; if (!have_len) fail(where + ": bad scan length"); }
-      else if (w1 == "camera_to_object") {
-        Eigen::Matrix4d m;
-        for (int r = 0; r < 4; ++r)
-          for (int c = 0; c < 4; ++c)
-            if (!(ls >> m(r, c)) || !std::isfinite(m(r, c))) fail(where + ": needs 16 finite numbers");
-        const Eigen::Matrix3d rot = m.topLeftCorner<3, 3>();
-        if (!(rot.transpose() * rot).isApprox(Eigen::Matrix3d::Identity(), 1e-6) || rot.determinant() < 0.0)
-          fail(where + ": rotation part is not a rotation");
-        img.pose.camera_to_object.matrix() = m;
-        have_pose = true;
-      }
-      continue;
-    }
-    if (w0 == "element") {
+      read_comment(ls, line, where, name, img, h);
+    } else if (w0 == "element") {
       std::string kind;
-      if (!(ls >> kind >> count) || kind != "vertex") fail(where + ": expected 'element vertex N'");
-      have_count = true;
-      continue;
+      if (!(ls >> kind >> h.count) || kind != "vertex") refuse(name, where + ": expected 'element vertex N'");
+      h.count_given = true;
+    } else if (w0 == "property") {
+      if (h.properties >= std::size(kProperties) || line != kProperties[h.properties])
+        refuse(name, where + ": expected '" + std::string(h.properties < std::size(kProperties) ? kProperties[h.properties] : "end_header") + "'");
+      ++h.properties;
+    } else {
+      refuse(name, where + ": unexpected header line");
     }
-    if (w0 == "property") {
-      if (prop >= std::size(kProperties) || line != kProperties[prop]) fail(where + ": expected '" + std::string(prop < std::size(kProperties) ? kProperties[prop] : "end_header") + "'");
-      ++prop;
-      continue;
-    }
-    fail(where + ": unexpected header line");
   }
-  if (!have_tag) fail("missing 'comment scancell range image 1' (not a scancell range image)");
-  if (!have_kind || !have_cols || !have_rows || !have_len || !have_pose || !have_count)
-    fail("header lacks one of kind, columns, rows, scan_length_mm, camera_to_object, element vertex");
-  if (prop != std::size(kProperties)) fail("header has " + std::to_string(prop) + " of " + std::to_string(std::size(kProperties)) + " properties");
-  const std::size_t body = end + std::strlen("end_header\n");
-  // Checked before any multiplication: a count of 2^62 times the record size wraps around 2^64.
-  const std::size_t body_bytes = data.size() - body;
-  const std::size_t max_count = static_cast<std::size_t>(img.columns) * static_cast<std::size_t>(img.rows);
-  if (count > max_count)
-    fail("header: element vertex " + std::to_string(count) + " exceeds the image's " + std::to_string(img.columns) +
-         " x " + std::to_string(img.rows) + " pixels");
-  if (count > body_bytes / kRecordBytes)
-    fail("body has " + std::to_string(body_bytes) + " bytes, too few for " + std::to_string(count) + " samples of " +
-         std::to_string(kRecordBytes) + " bytes (truncated?)");
-  const std::size_t expect = count * kRecordBytes;
-  if (body_bytes != expect)
-    fail("body has " + std::to_string(data.size() - body) + " bytes, " + std::to_string(count) + " samples need " + std::to_string(expect) + " (truncated?)");
+  if (!h.tag) refuse(name, "missing 'comment scancell range image 1' (not a scancell range image)");
+  if (!h.kind || !h.cols || !h.rows || !h.len || !h.pose || !h.count_given)
+    refuse(name, "header lacks one of kind, columns, rows, scan_length_mm, camera_to_object, element vertex");
+  if (h.properties != std::size(kProperties))
+    refuse(name, "header has " + std::to_string(h.properties) + " of " + std::to_string(std::size(kProperties)) + " properties");
+  return h;
+}
+
+/// The body's `count` records into the image's pixels; each pixel once, every value finite, simulation truth
+/// for all samples or none.
+void read_samples(const char* p, std::size_t count, const std::string& name, RangeImage& img) {
   img.samples.assign(static_cast<std::size_t>(img.columns) * img.rows, RangeSample{});
   img.truth.assign(img.samples.size(), SampleTruth{});
   std::size_t with_truth = 0;
-  const char* p = data.data() + body;
   for (std::size_t k = 0; k < count; ++k) {
     const int i = take<std::int32_t>(p), j = take<std::int32_t>(p);
-    if (i < 0 || j < 0 || i >= img.columns || j >= img.rows)
-      fail("sample " + std::to_string(k) + ": pixel (" + std::to_string(i) + ", " + std::to_string(j) + ") outside the image");
+    auto pixel = [&] { return "sample " + std::to_string(k) + ": pixel (" + std::to_string(i) + ", " + std::to_string(j) + ")"; };
+    if (i < 0 || j < 0 || i >= img.columns || j >= img.rows) refuse(name, pixel() + " outside the image");
     const std::size_t at = static_cast<std::size_t>(j) * img.columns + i;
     RangeSample& s = img.samples[at];
     SampleTruth& t = img.truth[at];
-    if (s.valid()) fail("sample " + std::to_string(k) + ": pixel (" + std::to_string(i) + ", " + std::to_string(j) + ") given twice");
+    if (s.valid()) refuse(name, pixel() + " given twice");
     for (auto* v : {&s.object_mm, &s.camera_mm, &t.object_mm})
       for (int c = 0; c < 3; ++c) (*v)[c] = take<float>(p);
     s.sigma_z_mm = take<float>(p);
     t.triangle = take<std::uint32_t>(p);
     s.measured = true;
     if (!s.object_mm.allFinite() || !s.camera_mm.allFinite() || !t.object_mm.allFinite() || !std::isfinite(s.sigma_z_mm) || s.sigma_z_mm < 0.0f)
-      fail("sample " + std::to_string(k) + ": non-finite or negative value");
+      refuse(name, "sample " + std::to_string(k) + ": non-finite or negative value");
     with_truth += t.triangle != kNoTriangle;
   }
   // Simulation truth is all or nothing: a real scanner's file has none, a simulated one has it everywhere.
   if (with_truth != 0 && with_truth != count)
-    fail(std::to_string(with_truth) + " of " + std::to_string(count) +
-         " samples carry a triangle id (simulation truth): a file has it for every sample or for none");
+    refuse(name, std::to_string(with_truth) + " of " + std::to_string(count) +
+                     " samples carry a triangle id (simulation truth): a file has it for every sample or for none");
   if (with_truth == 0) img.truth.clear();
+}
+
+}  // namespace
+
+RangeImage range_image_from_ply(const std::string& data, const std::string& name) {
+  const std::size_t end = data.find("end_header\n");
+  if (data.rfind("ply\n", 0) != 0 || end == std::string::npos) refuse(name, "not a PLY file (no 'ply' / 'end_header')");
+  RangeImage img;
+  const RangeHeader h = read_header(data, end, name, img);
+  const std::size_t body = end + std::strlen("end_header\n");
+  // Checked before any multiplication: a count of 2^62 times the record size wraps around 2^64.
+  const std::size_t body_bytes = data.size() - body;
+  const std::size_t max_count = static_cast<std::size_t>(img.columns) * static_cast<std::size_t>(img.rows);
+  if (h.count > max_count)
+    refuse(name, "header: element vertex " + std::to_string(h.count) + " exceeds the image's " + std::to_string(img.columns) + " x " +
+                     std::to_string(img.rows) + " pixels");
+  if (h.count > body_bytes / kRecordBytes)
+    refuse(name, "body has " + std::to_string(body_bytes) + " bytes, too few for " + std::to_string(h.count) + " samples of " +
+                     std::to_string(kRecordBytes) + " bytes (truncated?)");
+  const std::size_t expect = h.count * kRecordBytes;
+  if (body_bytes != expect)
+    refuse(name, "body has " + std::to_string(body_bytes) + " bytes, " + std::to_string(h.count) + " samples need " + std::to_string(expect) +
+                     " (truncated?)");
+  read_samples(data.data() + body, h.count, name, img);
   return img;
 }
 
