@@ -87,6 +87,77 @@ float TsdfVolume::field(std::size_t v) const {
   return behind_[v] >= occluding_views_ ? -1.0f : 1.0f;  // unseen behind surfaces: material; else empty
 }
 
+namespace {
+
+/// A grid corner and the field's value there.
+struct Corner {
+  long i, j, k;
+  float f;
+};
+
+/// One tetrahedron of a cube (corners `tet` of `c`) cut by the zero level: one triangle when one corner
+/// differs from the other three, two (a quad) when two and two, none when all agree. `emit` takes the edges
+/// (e0[n], e1[n]) each triangle vertex lies on and the outward direction (material to free space).
+template <class Position, class Emit>
+void march_tetrahedron(const std::array<Corner, 8>& c, const std::array<int, 4>& tet, Position position, Emit emit) {
+  std::array<const Corner*, 4> in{}, outside{};
+  int ni = 0, no = 0;
+  for (int n : tet) {
+    const Corner* cn = &c[static_cast<std::size_t>(n)];
+    if (cn->f < 0.0f) in[static_cast<std::size_t>(ni++)] = cn;
+    else outside[static_cast<std::size_t>(no++)] = cn;
+  }
+  if (ni == 0 || no == 0) return;
+  Eigen::Vector3d mi = Eigen::Vector3d::Zero(), mo = Eigen::Vector3d::Zero();
+  for (int n = 0; n < ni; ++n) mi += position(*in[static_cast<std::size_t>(n)]) / ni;
+  for (int n = 0; n < no; ++n) mo += position(*outside[static_cast<std::size_t>(n)]) / no;
+  const Eigen::Vector3d outward = mo - mi;
+  if (ni == 1) {
+    emit({in[0], in[0], in[0]}, {outside[0], outside[1], outside[2]}, outward);
+  } else if (no == 1) {
+    emit({in[0], in[1], in[2]}, {outside[0], outside[0], outside[0]}, outward);
+  } else {  // two and two: the quad a-c, a-d, b-d, b-c, as two triangles
+    const Corner *a = in[0], *b = in[1], *cc = outside[0], *d = outside[1];
+    emit({a, a, b}, {cc, d, d}, outward);
+    emit({a, b, b}, {cc, d, cc}, outward);
+  }
+}
+
+/// A closed piece of surface without a single measured point on it (a shadow several views agree on, far
+/// from the object; a bubble inside it) is not the object: only the pieces something was measured on.
+FusedModel keep_measured_pieces(const FusedModel& out) {
+  const std::size_t nv = out.mesh.vertices.size();
+  std::vector<std::uint32_t> parent(nv);
+  for (std::uint32_t v = 0; v < nv; ++v) parent[v] = v;
+  auto find = [&](std::uint32_t v) {
+    while (parent[v] != v) v = parent[v] = parent[parent[v]];
+    return v;
+  };
+  for (const auto& t : out.mesh.triangles) {
+    parent[find(t[1])] = find(t[0]);
+    parent[find(t[2])] = find(t[0]);
+  }
+  std::vector<std::uint8_t> real(nv, 0);
+  for (std::uint32_t v = 0; v < nv; ++v)
+    if (!out.hypothetical[v]) real[find(v)] = 1;
+  std::vector<std::uint32_t> remap(nv, UINT32_MAX);
+  FusedModel kept;
+  kept.observed_voxels = out.observed_voxels;
+  kept.carved_voxels = out.carved_voxels;
+  for (std::uint32_t v = 0; v < nv; ++v)
+    if (real[find(v)]) {
+      remap[v] = static_cast<std::uint32_t>(kept.mesh.vertices.size());
+      kept.mesh.vertices.push_back(out.mesh.vertices[v]);
+      kept.hypothetical.push_back(out.hypothetical[v]);
+    }
+  for (const auto& t : out.mesh.triangles)
+    if (remap[t[0]] != UINT32_MAX) kept.mesh.triangles.push_back({remap[t[0]], remap[t[1]], remap[t[2]]});
+  kept.dropped_pieces_vertices = nv - kept.mesh.vertices.size();
+  return kept;
+}
+
+}  // namespace
+
 FusedModel TsdfVolume::extract() const {
   FusedModel out;
   for (std::size_t v = 0; v < weight_.size(); ++v) {
@@ -113,10 +184,6 @@ FusedModel TsdfVolume::extract() const {
   // volume is closed: the rough-model decimator takes every face. One vertex per grid edge (axis, face or
   // body diagonal) the surface crosses, shared by every tetrahedron on that edge.
   std::unordered_map<std::uint64_t, std::uint32_t> vertex_of;
-  struct Corner {
-    long i, j, k;
-    float f;
-  };
   auto edge_vertex = [&](const Corner& a, const Corner& b) -> std::uint32_t {
     const std::uint64_t ia = at(a.i, a.j, a.k), ib = at(b.i, b.j, b.k);
     const std::uint64_t key = std::min(ia, ib) << 32 | std::max(ia, ib);
@@ -156,60 +223,9 @@ FusedModel TsdfVolume::extract() const {
           material += cn.f < 0.0f;
         }
         if (material == 0 || material == 8) continue;
-        for (const auto& tet : kuhn) {
-          std::array<const Corner*, 4> in{}, outside{};
-          int ni = 0, no = 0;
-          for (int n : tet) {
-            const Corner* cn = &c[static_cast<std::size_t>(n)];
-            if (cn->f < 0.0f) in[static_cast<std::size_t>(ni++)] = cn;
-            else outside[static_cast<std::size_t>(no++)] = cn;
-          }
-          if (ni == 0 || no == 0) continue;
-          Eigen::Vector3d mi = Eigen::Vector3d::Zero(), mo = Eigen::Vector3d::Zero();
-          for (int n = 0; n < ni; ++n) mi += position(*in[static_cast<std::size_t>(n)]) / ni;
-          for (int n = 0; n < no; ++n) mo += position(*outside[static_cast<std::size_t>(n)]) / no;
-          const Eigen::Vector3d outward = mo - mi;
-          if (ni == 1) {
-            emit({in[0], in[0], in[0]}, {outside[0], outside[1], outside[2]}, outward);
-          } else if (no == 1) {
-            emit({in[0], in[1], in[2]}, {outside[0], outside[0], outside[0]}, outward);
-          } else {  // two and two: the quad a-c, a-d, b-d, b-c, as two triangles
-            const Corner *a = in[0], *b = in[1], *cc = outside[0], *d = outside[1];
-            emit({a, a, b}, {cc, d, d}, outward);
-            emit({a, b, b}, {cc, d, cc}, outward);
-          }
-        }
+        for (const auto& tet : kuhn) march_tetrahedron(c, tet, position, emit);
       }
-  // A closed piece of surface without a single measured point on it (a shadow several views agree on, far
-  // from the object; a bubble inside it) is not the object: keep only the pieces something was measured on.
-  const std::size_t nv = out.mesh.vertices.size();
-  std::vector<std::uint32_t> parent(nv);
-  for (std::uint32_t v = 0; v < nv; ++v) parent[v] = v;
-  auto find = [&](std::uint32_t v) {
-    while (parent[v] != v) v = parent[v] = parent[parent[v]];
-    return v;
-  };
-  for (const auto& t : out.mesh.triangles) {
-    parent[find(t[1])] = find(t[0]);
-    parent[find(t[2])] = find(t[0]);
-  }
-  std::vector<std::uint8_t> real(nv, 0);
-  for (std::uint32_t v = 0; v < nv; ++v)
-    if (!out.hypothetical[v]) real[find(v)] = 1;
-  std::vector<std::uint32_t> remap(nv, UINT32_MAX);
-  FusedModel kept;
-  kept.observed_voxels = out.observed_voxels;
-  kept.carved_voxels = out.carved_voxels;
-  for (std::uint32_t v = 0; v < nv; ++v)
-    if (real[find(v)]) {
-      remap[v] = static_cast<std::uint32_t>(kept.mesh.vertices.size());
-      kept.mesh.vertices.push_back(out.mesh.vertices[v]);
-      kept.hypothetical.push_back(out.hypothetical[v]);
-    }
-  for (const auto& t : out.mesh.triangles)
-    if (remap[t[0]] != UINT32_MAX) kept.mesh.triangles.push_back({remap[t[0]], remap[t[1]], remap[t[2]]});
-  kept.dropped_pieces_vertices = nv - kept.mesh.vertices.size();
-  return kept;
+  return keep_measured_pieces(out);
 }
 
 }  // namespace scancell::planner
