@@ -4,8 +4,6 @@
 // --as-given: the mesh as given (every vertex a row), shipped settings, in free space and on the turntable cell,
 // each against the same plan with viewpoint positions from d_v alone (min_position_spacing_fraction 0).
 // Default mesh: ../shared/meshes/bunny00.off next to the repository (the Stanford bunny, 37,706 vertices).
-#include <sys/resource.h>
-
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -17,6 +15,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include "bench/bench_common.hpp"
 #include "planner/config.hpp"
 #include "planner/plan.hpp"
 
@@ -24,14 +23,6 @@ namespace sp = scancell::planner;
 using Clock = std::chrono::steady_clock;
 
 namespace {
-
-double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
-
-double peak_rss_mb() {
-  rusage u{};
-  getrusage(RUSAGE_SELF, &u);
-  return u.ru_maxrss / 1024.0;
-}
 
 /// Raw Embree occlusion throughput on the scene: random segments from surface points in random directions,
 /// 300 mm long, streamed 256 at a time like the matrix build, over the same threads.
@@ -54,7 +45,7 @@ double raw_occlusion_rays_per_s(const sp::RoughModel& rm, const sp::OcclusionSce
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n_rays, 4096), [&](const auto& r) {
     scene.occluded(rays.data() + r.begin(), r.size(), occ.data() + r.begin());
   });
-  return n_rays / since(t);
+  return n_rays / scancell::seconds_since(t);
 }
 
 struct CaseResult {
@@ -106,7 +97,7 @@ CaseResult run_case(const sp::TriangleMesh& mesh_mm, std::size_t rough_vertices,
   std::printf("  %-44s %10.2f M/s\n", "raw Embree occlusion rays/s (random)", raw / 1e6);
   std::printf("  %-44s %10.2f      (target >= 0.5)\n", "ratio matrix / raw", matrix_rays_per_s / raw);
   std::printf("  %-44s %10.1f MB\n", "matrix memory", p.matrix_bytes / 1e6);
-  std::printf("  %-44s %10.1f MB\n", "peak RSS so far", peak_rss_mb());
+  std::printf("  %-44s %10.1f MB\n", "peak RSS so far", scancell::bench::peak_rss_mb());
 
   if (naive) {
     // The same matrix with no culling, over the same candidates: every pair transformed, both rays cast.
@@ -119,7 +110,7 @@ CaseResult run_case(const sp::TriangleMesh& mesh_mm, std::size_t rough_vertices,
       cands = sp::generate_viewpoints(p.rough, scene, sensor, spec, vs);
       const auto t = Clock::now();
       const auto naive_m = sp::build_measurability_naive(p.rough, scene, sensor, spec, cands, {}, &ns);
-      naive_s = since(t);
+      naive_s = scancell::seconds_since(t);
       const auto fast_m = sp::build_measurability(p.rough, scene, sensor, spec, cands);
       for (std::size_t j = 0; j < cands.size(); ++j) equal_cols += fast_m.columns[j].rows() == naive_m.columns[j].rows();
     });

@@ -12,8 +12,6 @@
 //   - time of the fusion (cloud_ply + fuse_model) and the process's peak memory after it (an upper bound on
 //     the fusion's: plan, scans and verification run in the same process), the issue's ≤ 10 s and ≤ 2 GB.
 //   bench_product [--meshes DIR] [--threads N] [--csv FILE]
-#include <sys/resource.h>
-
 #include <algorithm>
 #include <cmath>
 #include <tuple>
@@ -27,6 +25,7 @@
 
 #include <tbb/global_control.h>
 
+#include "bench/bench_common.hpp"
 #include "planner/config.hpp"
 #include "planner/geometry/scene.hpp"
 #include "planner/geometry/surface_distance.hpp"
@@ -42,14 +41,6 @@ namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
 namespace {
-
-double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
-
-double peak_rss_mb() {
-  rusage u{};
-  getrusage(RUSAGE_SELF, &u);
-  return u.ru_maxrss / 1024.0;
-}
 
 struct Row {
   std::string object;
@@ -114,8 +105,8 @@ Row run(const std::string& name, const sp::TriangleMesh& truth, const sp::Sensor
   (void)sp::cloud_ply(views, 0, spec, cloud, true);
   sp::ModelSummary ms;
   const sp::SurfaceMesh model = sp::fuse_model(cloud, spec, ms);
-  r.fuse_s = since(t);
-  r.peak_mb = peak_rss_mb();  // the process's peak so far: an upper bound on the fusion's
+  r.fuse_s = scancell::seconds_since(t);
+  r.peak_mb = scancell::bench::peak_rss_mb();  // the process's peak so far: an upper bound on the fusion's
   r.samples = cloud.compliant;
   r.model_vertices = model.mesh.vertices.size();
   r.boundary_edges = ms.boundary_edges;
