@@ -5,7 +5,7 @@ JOBS       ?= $(shell nproc)
 CMAKE      ?= cmake
 SCANCELL    = $(BUILD)/tools/scancell
 
-.PHONY: all deps build test test-asan fuzz demo demo-rough demo-flip demo-offline kill-test bench quality quality-cell monitor monitor-check clean
+.PHONY: all deps build test test-asan fuzz demo demo-rough demo-flip demo-gige demo-offline kill-test bench quality quality-cell monitor monitor-check clean
 
 all: build
 
@@ -67,6 +67,10 @@ demo-rough: build
 
 demo-flip: build
 	scripts/demo.sh $(BUILD) flip
+
+# The demo's job with the scanner on the GigE Vision path (an emulated GigE Vision device on 127.0.0.1).
+demo-gige: build
+	scripts/demo.sh $(BUILD) gige
 
 # The planner and verifier alone, offline: a plan file, its verification report and coverage pictures.
 demo-offline: build

@@ -2,10 +2,11 @@
 # make demo: a whole simulated scan job end to end. Starts five simulated Modbus TCP drives (scancell-sim on
 # loopback), starts scancelld on them with the simulated line scanner, submits a job on the mushroom's rough
 # model, watches it with scancellctl and prints the result table (views, measured coverage, m_v verified
-# against the ground-truth mesh, time, coverage picture). Usage: scripts/demo.sh BUILD_DIR [rough|flip]
+# against the ground-truth mesh, time, coverage picture). Usage: scripts/demo.sh BUILD_DIR [rough|flip|gige]
 # With "rough" the job starts from nothing but the object's bounding box: rough scan, fusion into a rough
 # model, plan, execute, register, replan (make demo-rough). With "flip" the job measures the fandisk in two
-# setups, turned over by the (simulated) operator in between (make demo-flip).
+# setups, turned over by the (simulated) operator in between (make demo-flip). With "gige" the mushroom job
+# runs with the scanner on the GigE Vision path (config/demo/scancelld-gige.yaml; make demo-gige).
 set -euo pipefail
 BUILD=${1:-build}
 MODE=${2:-mesh}
@@ -26,7 +27,9 @@ SIM_PID=$!
 for _ in $(seq 100); do grep -q "drive 4 on" "$D/sim.log" 2>/dev/null && break; sleep 0.05; done
 grep -q "drive 4 on" "$D/sim.log" || { echo "demo: the drive simulator did not start:"; cat "$D/sim.log"; exit 1; }
 echo "== drives: 5 simulated Modbus TCP drives on 127.0.0.1:15501-15505"
-"$BUILD/daemon/scancelld" --config config/demo/scancelld.yaml --data-dir "$D/data" --socket "$D/control.sock" \
+CONFIG=config/demo/scancelld.yaml
+[ "$MODE" = gige ] && CONFIG=config/demo/scancelld-gige.yaml
+"$BUILD/daemon/scancelld" --config "$CONFIG" --data-dir "$D/data" --socket "$D/control.sock" \
   > "$D/scancelld.log" 2>&1 &
 DAEMON_PID=$!
 for _ in $(seq 200); do [ -S "$D/control.sock" ] && break; sleep 0.05; done
@@ -56,6 +59,7 @@ elif [ "$MODE" = rough ]; then
   RC=$?
   grep -h "rough model:" "$D/scancelld.log" 2>/dev/null || true
 else
+  [ "$MODE" = gige ] && echo "== scanner: the virtual scanner as a GigE Vision device on 127.0.0.1, read by the GenICam driver"
   echo "== submit: tests/data/mushroom.off, longest side 200 mm, thesis spec (0.05 mm, 2 samples/mm2)"
   "$BUILD/tools/scancellctl" --socket "$D/control.sock" submit --mesh tests/data/mushroom.off --fit-mm 200 --watch
   RC=$?
