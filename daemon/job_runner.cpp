@@ -934,11 +934,12 @@ void JobRunner::explore(Job& j, std::int64_t plan, const sp::CellModel& table_ce
     const json pj = json::parse(v.pose_json);
     j.progress.view = v.index + 1;
     const std::string label = what + " " + std::to_string(v.index + 1) + "/" + std::to_string(views.size());
-    const Acquisition got = acquire_view(positioner_, *head, table_cell, models_.sensor, pj.at("axes").get<std::vector<double>>(),
+    Acquisition got = acquire_view(positioner_, *head, table_cell, models_.sensor, pj.at("axes").get<std::vector<double>>(),
                                          pj.at("scan_length_mm").get<double>(), settings_, stop, [&](const std::string& step) {
                                            j.progress.event = label + ": " + step;
                                            report_(j.progress);
                                          });
+    got.image.job = j.id;
     journal_.store_scan(plan, v.index, sp::range_image_to_ply(got.image), what);
     journal_.event(j.id, label + " stored: " + std::to_string(got.image.valid_count()) + " samples");
   }
@@ -1120,6 +1121,7 @@ void JobRunner::execute_view(Job& j, std::int64_t plan, const ViewRecord& v, con
   }
   // Store (durable before it counts), then update the measured coverage and the model views register to.
   trace_.mark("storing");
+  img.job = j.id;
   journal_.store_scan(plan, v.index, sp::range_image_to_ply(img), note);
   trace_.mark("stored");
   if (note.empty()) {

@@ -407,10 +407,20 @@ int cmd_fuse(int argc, char** argv) {
     if (!o.count(k)) throw UsageError(std::string("missing ") + k);
   const sp::ModelSpec spec = sp::load_spec(o.at("--spec"));
   std::vector<sp::ProductView> views;
+  std::string job_file;  // the first image that names its job
+  std::int64_t job = 0;
   for (const auto& f : scan_files(o.at("--scans"))) {
     sp::ProductView v;
     v.image = sp::load_range_image(f);  // a damaged file: DataError naming it
     if (v.image.valid_count() == 0) throw scancell::DataError(f.string() + ": no samples (an empty range image; leave it out)");
+    // One job's images make one product: another job's view was registered to another placement.
+    if (v.image.job > 0 && job > 0 && v.image.job != job)
+      throw scancell::DataError(f.string() + ": from job " + std::to_string(v.image.job) + ", but " + job_file + " is from job " +
+                                std::to_string(job) + " (a product is made from one job's range images)");
+    if (v.image.job > 0 && job == 0) {
+      job = v.image.job;
+      job_file = f.string();
+    }
     v.view = static_cast<int>(views.size());
     views.push_back(std::move(v));
   }

@@ -110,6 +110,7 @@ std::string range_image_to_ply(const RangeImage& img) {
   h << "comment scancell range image 1\n";
   h << "comment kind " << (img.kind == SensorKind::line_scan ? "line_scan" : "random_access") << "\n";
   h << "comment columns " << img.columns << "\ncomment rows " << img.rows << "\n";
+  if (img.job > 0) h << "comment job " << img.job << "\n";
   char num[64];
   std::snprintf(num, sizeof num, "%.17g", img.pose.scan_length_mm);
   h << "comment scan_length_mm " << num << "\ncomment camera_to_object";
@@ -192,6 +193,8 @@ void read_comment(std::istringstream& ls, const std::string& line, const std::st
   } else if (w1 == "rows") {
     h.rows = static_cast<bool>(ls >> img.rows) && img.rows >= 2 && img.rows <= 1 << 16;
     if (!h.rows) refuse(name, where + ": rows must be in [2, 65536]");
+  } else if (w1 == "job") {
+    if (!(ls >> img.job) || img.job < 1) refuse(name, where + ": the job must be a number >= 1");
   } else if (w1 == "scan_length_mm") {
     h.len = static_cast<bool>(ls >> img.pose.scan_length_mm) && std::isfinite(img.pose.scan_length_mm) && img.pose.scan_length_mm >= 0.0;
     if (!h.len) refuse(name, where + ": bad scan length");

@@ -46,6 +46,9 @@ struct RangeImage {
   int columns = 0;  // N_x
   int rows = 0;     // N_y
   ScanPose pose;
+  /// The scan job that measured it (`comment job N` in the file), 0 when none did (offline, a test). A
+  /// product is made from one job's images: `scancell fuse` refuses a mix.
+  std::int64_t job = 0;
   std::vector<RangeSample> samples;  // row-major, j * columns + i
   /// Line scan on the cell: 1 for each row whose profile was acquired, 0 for a profile the sweep passed
   /// without firing (the position compare missed it). A lost row holds no samples and says nothing about

@@ -351,6 +351,24 @@ TEST_F(Cli, FuseMakesTheModelFromRangeImagesAndRefusesDamagedOrEmptyOnes) {
   EXPECT_THAT(r.output, HasSubstr("empty.ply: no samples"));
   EXPECT_FALSE(fs::exists(model));
   EXPECT_EQ(run("fuse --scans " + (dir_ / "scans").string() + " --out " + model.string()).status, 2);  // no --spec
+
+  // Images name the job that measured them (the daemon writes `comment job N`); one product is one job's.
+  RangeImage a = load_range_image(dir_ / "scans" / "view0.ply"), b = load_range_image(dir_ / "scans" / "view1.ply");
+  a.job = 3;
+  b.job = 5;
+  save_range_image(a, dir_ / "job3.ply");
+  save_range_image(b, dir_ / "job5.ply");
+  EXPECT_EQ(load_range_image(dir_ / "job3.ply").job, 3);
+  r = run("fuse --scans " + (dir_ / "job3.ply").string() + "," + (dir_ / "job5.ply").string() + " --spec " + spec + " --out " +
+          model.string());
+  EXPECT_EQ(r.status, 5) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("job5.ply: from job 5, but "));
+  EXPECT_THAT(r.output, HasSubstr("job3.ply is from job 3"));
+  EXPECT_FALSE(fs::exists(model));
+  b.job = 3;
+  save_range_image(b, dir_ / "job5.ply");
+  EXPECT_EQ(run("fuse --scans " + (dir_ / "job3.ply").string() + "," + (dir_ / "job5.ply").string() + " --spec " + spec + " --out " +
+                model.string()).status, 0);
 }
 
 TEST_F(Cli, WritesADocumentedPlan) {
