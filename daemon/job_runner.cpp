@@ -453,6 +453,13 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause, const j
   // The stored views that count, read once: for the product and, in simulation, the ground-truth checks.
   std::vector<StoredView> stored = load_job_views(journal_, j.id);
   const Product product = views > 0 ? write_product(j, stored, result) : Product{};
+  if (views > 0) {
+    // What the product holds, and what it does not: a view whose registration failed is stored but left out.
+    result["product_views"] = stored.size();
+    if (static_cast<std::size_t>(views) > stored.size())
+      result["product_note"] = std::to_string(static_cast<std::size_t>(views) - stored.size()) + " of " + std::to_string(views) +
+                               " views are not in the cloud or the model: their registration failed (the journal's events name each)";
+  }
   std::vector<sp::RangeImage> images;
   if (state != JobState::aborted)
     for (auto& v : stored) images.push_back(std::move(v.image));
@@ -464,8 +471,8 @@ void JobRunner::finish(Job& j, JobState state, const std::string& cause, const j
   if (!j.placement.is_null()) result["placement"] = placement_json(j.placement);
   if (j.rough && j.coverage) rows_into(j, state, advice, result);
   // Simulation: the checks against the object on the table. Ground truth exists only where the scanner is
-  // simulated in-process: a device on the wire (sim_gige, a real scanner) delivers what a real one does, and
-  // the checks that need the true hit points are skipped.
+  // simulated (in process, or sim_gige with the device's truth joined beside the wire): a real scanner's
+  // images carry none, and the checks that need the true hit points are skipped.
   const bool with_truth = all_have_truth(images);
   if (!with_truth && !j.truth_object.vertices.empty())
     result["ground_truth_checks"] = "not run: the scans carry no simulation truth (the scanner is a device on the wire)";
