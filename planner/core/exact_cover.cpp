@@ -187,22 +187,63 @@ class Streamer : public CbcEventHandler {
   double last_bound_ = -1e300;
 };
 
+/// The set-cover ILP (eq. 4.7-4.9): one binary per live column at its cost, each live row covered at least once.
+void load_cover_ilp(const Problem& P, OsiClpSolverInterface& solver) {
+  const int n = static_cast<int>(P.ilp_col.size());
+  CoinPackedMatrix a(false, 0, 0);
+  a.setDimensions(0, n);
+  for (const auto& r : P.rows) {
+    std::vector<double> ones(r.size(), 1.0);
+    a.appendRow(static_cast<int>(r.size()), r.data(), ones.data());
+  }
+  std::vector<double> lb(n, 0.0), ub(n, 1.0), obj(n), rlb(P.rows.size(), 1.0), rub(P.rows.size(), COIN_DBL_MAX);
+  for (int j = 0; j < n; ++j) obj[j] = P.cost[P.ilp_col[j]];
+  solver.loadProblem(a, lb.data(), ub.data(), obj.data(), rlb.data(), rub.data());
+  for (int j = 0; j < n; ++j) solver.setInteger(j);
+  solver.messageHandler()->setLogLevel(0);
+}
+
+/// A disconnected cover (eq. 4.10 by lazy constraints): one cut per component, against a chosen view of the
+/// largest other component, added to `solver`; returns how many. Cuts no cover can meet end the worker.
+std::size_t add_connectivity_cuts(const Problem& P, std::vector<std::vector<std::uint32_t>> comps, OsiClpSolverInterface& solver,
+                                  int fd) {
+  std::size_t cuts = 0;
+  std::sort(comps.begin(), comps.end(), [](const auto& p1, const auto& p2) { return p1.size() > p2.size(); });
+  for (std::size_t c = 0; c < comps.size(); ++c) {
+    const auto& C = comps[c];
+    const std::uint32_t a = C.front(), bcol = comps[c == 0 ? 1 : 0].front();
+    std::vector<char> in_c(P.m->n_cols(), 0);
+    for (auto k : C) in_c[k] = 1;
+    std::vector<int> idx;
+    for (auto k0 : C)
+      for (auto k : P.neighbours(k0))
+        if (!in_c[k] && P.ilp_of[k] >= 0) idx.push_back(static_cast<int>(P.ilp_of[k]));
+    std::sort(idx.begin(), idx.end());
+    idx.erase(std::unique(idx.begin(), idx.end()), idx.end());
+    std::vector<double> el(idx.size(), 1.0);
+    double rhs = -1.0;  // Σ x_N − x_a − x_b ≥ −1, constants moved for forced views
+    for (std::uint32_t end : {a, bcol}) {
+      if (P.ilp_of[end] >= 0) {
+        idx.push_back(static_cast<int>(P.ilp_of[end]));
+        el.push_back(-1.0);
+      } else {
+        rhs += 1.0;  // forced: x = 1
+      }
+    }
+    if (idx.empty() && rhs > 0.0) {
+      send(fd, P.core ? "E no connected cover within the core problem\n"
+                      : "E infeasible: forced views cannot be connected at this t_r\n");
+      ::_exit(0);
+    }
+    solver.addRow(static_cast<int>(idx.size()), idx.data(), el.data(), rhs, COIN_DBL_MAX);
+    ++cuts;
+  }
+  return cuts;
+}
+
 [[noreturn]] void run_worker(const Problem& P, int fd, Clock::time_point deadline) {
   OsiClpSolverInterface solver;
-  {
-    const int n = static_cast<int>(P.ilp_col.size());
-    CoinPackedMatrix a(false, 0, 0);
-    a.setDimensions(0, n);
-    for (const auto& r : P.rows) {
-      std::vector<double> ones(r.size(), 1.0);
-      a.appendRow(static_cast<int>(r.size()), r.data(), ones.data());
-    }
-    std::vector<double> lb(n, 0.0), ub(n, 1.0), obj(n), rlb(P.rows.size(), 1.0), rub(P.rows.size(), COIN_DBL_MAX);
-    for (int j = 0; j < n; ++j) obj[j] = P.cost[P.ilp_col[j]];
-    solver.loadProblem(a, lb.data(), ub.data(), obj.data(), rlb.data(), rub.data());
-    for (int j = 0; j < n; ++j) solver.setInteger(j);
-    solver.messageHandler()->setLogLevel(0);
-  }
+  load_cover_ilp(P, solver);
   double best = 1e300;
   std::size_t cuts = 0;
   for (int round = 0;; ++round) {
@@ -255,37 +296,7 @@ class Streamer : public CbcEventHandler {
       send(fd, model.isProvenOptimal() ? "E optimal\n" : "E time limit\n");
       ::_exit(0);
     }
-    // Disconnected: one cut per component, against a chosen view of the largest other component.
-    std::sort(comps.begin(), comps.end(), [](const auto& p1, const auto& p2) { return p1.size() > p2.size(); });
-    for (std::size_t c = 0; c < comps.size(); ++c) {
-      const auto& C = comps[c];
-      const std::uint32_t a = C.front(), bcol = comps[c == 0 ? 1 : 0].front();
-      std::vector<char> in_c(P.m->n_cols(), 0);
-      for (auto k : C) in_c[k] = 1;
-      std::vector<int> idx;
-      for (auto k0 : C)
-        for (auto k : P.neighbours(k0))
-          if (!in_c[k] && P.ilp_of[k] >= 0) idx.push_back(static_cast<int>(P.ilp_of[k]));
-      std::sort(idx.begin(), idx.end());
-      idx.erase(std::unique(idx.begin(), idx.end()), idx.end());
-      std::vector<double> el(idx.size(), 1.0);
-      double rhs = -1.0;  // Σ x_N − x_a − x_b ≥ −1, constants moved for forced views
-      for (std::uint32_t end : {a, bcol}) {
-        if (P.ilp_of[end] >= 0) {
-          idx.push_back(static_cast<int>(P.ilp_of[end]));
-          el.push_back(-1.0);
-        } else {
-          rhs += 1.0;  // forced: x = 1
-        }
-      }
-      if (idx.empty() && rhs > 0.0) {
-        send(fd, P.core ? "E no connected cover within the core problem\n"
-                        : "E infeasible: forced views cannot be connected at this t_r\n");
-        ::_exit(0);
-      }
-      solver.addRow(static_cast<int>(idx.size()), idx.data(), el.data(), rhs, COIN_DBL_MAX);
-      ++cuts;
-    }
+    cuts += add_connectivity_cuts(P, std::move(comps), solver, fd);
     char line[64];
     std::snprintf(line, sizeof line, "C %zu\n", cuts);
     send(fd, line);
