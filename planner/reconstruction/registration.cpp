@@ -274,11 +274,14 @@ NormalEquations pair_with_model(const IcpSamples& s, const std::vector<Eigen::Ve
 }
 
 /// Solves in the generalized eigenbasis (disp-orthonormal: x = Σ v_e (v_e·atb) / λ_e), leaving out the slides
-/// (λ under min_conditioning), which it counts in r.free_directions.
-Vec6 solve_fixed_directions(const Eigen::GeneralizedSelfAdjointEigenSolver<Mat6>& es, const Vec6& atb, const IcpOptions& o, IcpResult& r) {
-  Vec6 x = Vec6::Zero();
+/// (λ under min_conditioning), which it counts in r.free_directions. N unknowns: all six motions, or the
+/// three plate motions (solve_plate_motions).
+template <int N>
+Eigen::Matrix<double, N, 1> solve_fixed_directions(const Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::Matrix<double, N, N>>& es,
+                                                   const Eigen::Matrix<double, N, 1>& atb, const IcpOptions& o, IcpResult& r) {
+  Eigen::Matrix<double, N, 1> x = Eigen::Matrix<double, N, 1>::Zero();
   r.free_directions = 0;
-  for (int e = 0; e < 6; ++e) {
+  for (int e = 0; e < N; ++e) {
     const double lambda = es.eigenvalues()(e);
     if (lambda < o.min_conditioning) {
       ++r.free_directions;
@@ -311,16 +314,7 @@ Vec6 solve_plate_motions(const NormalEquations& e, const Eigen::Matrix<double, 6
   Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::Matrix3d> es(a, disp);
   r.conditioning = es.eigenvalues()(0);
   r.weakest = (b * es.eigenvectors().col(0)).normalized();
-  Eigen::Vector3d y = Eigen::Vector3d::Zero();
-  r.free_directions = 0;
-  for (int k = 0; k < 3; ++k) {
-    if (es.eigenvalues()(k) < o.min_conditioning) {
-      ++r.free_directions;
-      continue;
-    }
-    y += es.eigenvectors().col(k) * (es.eigenvectors().col(k).dot(atb) / es.eigenvalues()(k));
-  }
-  return b * y;
+  return b * solve_fixed_directions<3>(es, atb, o, r);
 }
 
 /// Trust region: no sample moves more than half the pairing distance in one step, so that a poorly fixed
@@ -402,7 +396,7 @@ IcpResult register_points(const std::vector<Eigen::Vector3d>& pts_in, const Mode
       Eigen::GeneralizedSelfAdjointEigenSolver<Mat6> es(e.ata, e.disp);
       r.conditioning = es.eigenvalues()(0);
       r.weakest = es.eigenvectors().col(0).normalized();
-      x = solve_fixed_directions(es, e.atb, o, r);
+      x = solve_fixed_directions<6>(es, e.atb, o, r);
     }
     if (r.conditioning < o.min_conditioning && !o.partial) {
       r.why = "ill-conditioned: the view's shape does not fix its pose (conditioning " + std::to_string(r.conditioning) +
