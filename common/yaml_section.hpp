@@ -97,6 +97,16 @@ class Section {
     }
     return v;
   }
+  /// A positive value up to `hi`, (0, hi]: absent gives `fallback`; 0 would mean "none at all", not "no limit".
+  double positive_up_to(const std::string& key, double fallback, double hi) {
+    const double v = get_or<double>(key, fallback);
+    if (!(v > 0.0 && v <= hi)) {
+      std::ostringstream os;
+      os << "must be in (0, " << hi << "], got " << v;
+      fail(key_path(key), os.str());
+    }
+    return v;
+  }
   /// Refuses keys nobody asked for: a typo must not silently fall back to a default.
   void finish() const {
     for (const auto& kv : node_) {

@@ -173,8 +173,7 @@ void read_jobs(DaemonConfig& c, scancell::Section s) {
   j.max_setups = s.ranged("max_setups", j.max_setups, 1, kMaxSetups);
   j.sim_placement_error_mm = s.ranged("sim_placement_error_mm", j.sim_placement_error_mm, 0.0, 50.0);
   j.sim_placement_error_rad = s.ranged("sim_placement_error_rad", j.sim_placement_error_rad, 0.0, M_PI);
-  j.coverage.row_fraction = s.get_or<double>("row_fraction", j.coverage.row_fraction);
-  if (!(j.coverage.row_fraction > 0.0 && j.coverage.row_fraction <= 1.0)) s.fail(s.key_path("row_fraction"), "must be in (0, 1]");
+  j.coverage.row_fraction = s.positive_up_to("row_fraction", j.coverage.row_fraction, 1.0);
   j.coverage.normal_tolerance_mm = s.non_negative("normal_tolerance_mm", 0.0);
   j.move_timeout = std::chrono::milliseconds(static_cast<long>(1000.0 * s.get_or<double>("move_timeout_s", 60.0)));
   if (j.move_timeout.count() <= 0) s.fail(s.key_path("move_timeout_s"), "must be > 0");

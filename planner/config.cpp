@@ -160,17 +160,6 @@ std::uint64_t whole_number(Section& s, const std::string& key, std::uint64_t fal
   return static_cast<std::uint64_t>(v);
 }
 
-/// A positive limit in (0, hi]: 0 would mean "no time at all", not "no limit".
-double positive_up_to(Section& s, const std::string& key, double fallback, double hi) {
-  const double v = s.get_or<double>(key, fallback);
-  if (!(v > 0.0 && v <= hi)) {
-    std::ostringstream os;
-    os << "must be in (0, " << hi << "], got " << v;
-    s.fail(s.key_path(key), os.str());
-  }
-  return v;
-}
-
 void read_viewpoints(Section v, ViewpointSettings& vs) {
   const std::string scheme = v.get_or<std::string>("scheme", to_string(vs.scheme));
   if (scheme == "variable") vs.scheme = ViewpointScheme::variable;
@@ -208,11 +197,11 @@ void read_cover(Section c, CoverSettings& cs) {
   else if (norm == "smaller_view") cs.normalizer = RegistrationNormalizer::smaller_view;
   else c.fail(c.key_path("registration_normalizer"), "must be max_view or smaller_view, got '" + norm + "'");
   cs.eliminate_redundant = c.get_or<bool>("eliminate_redundant", cs.eliminate_redundant);
-  cs.exact_time_limit_s = positive_up_to(c, "exact_time_limit_s", cs.exact_time_limit_s, 86400.0);
+  cs.exact_time_limit_s = c.positive_up_to("exact_time_limit_s", cs.exact_time_limit_s, 86400.0);
   cs.min_view_gain = c.non_negative("min_view_gain_mm2", cs.min_view_gain);
   cs.local_search_iterations = whole_number(c, "local_search_iterations", cs.local_search_iterations, 0.0, 1e9);
   cs.local_search_stall_work = whole_number(c, "local_search_stall_work", cs.local_search_stall_work, 1.0, 1e15);
-  cs.local_search_time_limit_s = positive_up_to(c, "local_search_time_limit_s", cs.local_search_time_limit_s, 3600.0);
+  cs.local_search_time_limit_s = c.positive_up_to("local_search_time_limit_s", cs.local_search_time_limit_s, 3600.0);
   c.finish();
 }
 
