@@ -36,9 +36,11 @@
 #include "planner/core/measurability.hpp"
 #include "planner/plan.hpp"
 #include "planner/sim/synthetic.hpp"
+#include "cell_oracle.hpp"
 
 namespace sp = scancell::planner;
 namespace fs = std::filesystem;
+namespace bench = scancell::bench;
 
 namespace {
 
@@ -49,101 +51,6 @@ struct Object {
   std::string name;
   std::function<sp::TriangleMesh()> make;
 };
-
-/// The oracle's candidates: one per `decimation`-th fine row, looking along the normal.
-std::vector<sp::Viewpoint> oracle_candidates(const sp::RoughModel& fine, const sp::SensorModel& sensor,
-                                             const sp::ModelSpec& spec, const sp::CellModel* cell, int decimation) {
-  const double standoff = 1.02 * sensor.optimal_standoff_mm;
-  const double length = sp::design_scan_length_mm(sensor, spec, standoff, std::numbers::pi / 6);
-  std::vector<sp::Viewpoint> out;
-  double tilt_max = std::numbers::pi / 2;
-  if (cell) {
-    const auto& tilt = cell->axes[cell->axis_index("tilt")];
-    tilt_max = std::min(std::abs(tilt.min), std::abs(tilt.max));
-  }
-  for (std::uint32_t i = 0; i < fine.size(); i += decimation) {
-    Eigen::Vector3d b = -fine.normals[i];
-    if (!cell) {
-      for (int k = 0; k < 8; ++k) {
-        sp::Viewpoint v;
-        v.axis = b;
-        v.twist_rad = 2 * std::numbers::pi * k / 8;
-        v.position = fine.points[i] - b * standoff;
-        v.standoff_mm = standoff;
-        v.scan_length_mm = length;
-        v.target_row = static_cast<std::int32_t>(i);
-        out.push_back(v);
-      }
-      continue;
-    }
-    // The cell's one twist: the baseline horizontal, the camera on the far side of the boresight's horizontal
-    // part; the boresight's elevation clamped to the tilt range.
-    Eigen::Vector2d h = b.head<2>();
-    if (h.norm() < 1e-9) h = Eigen::Vector2d(-1, 0);
-    h.normalize();
-    const double elev = std::clamp(std::asin(std::clamp(b.z(), -1.0, 1.0)), -tilt_max, tilt_max);
-    b = Eigen::Vector3d(h.x() * std::cos(elev), h.y() * std::cos(elev), std::sin(elev));
-    const Eigen::Vector3d y = -Eigen::Vector3d::UnitZ().cross(b).normalized();
-    const Eigen::Vector3d z = -b;
-    const Eigen::Vector3d x = y.cross(z);
-    Eigen::Matrix3d r;
-    r.col(0) = x;
-    r.col(1) = y;
-    r.col(2) = z;
-    sp::Viewpoint v = sp::viewpoint_from_pose(r, fine.points[i] - b * standoff, length);
-    v.standoff_mm = standoff;
-    v.target_row = static_cast<std::int32_t>(i);
-    out.push_back(v);
-  }
-  return out;
-}
-
-/// Area-weighted cumulative fraction (of `of_area`) a sequence of columns covers, restricted to `mask` rows.
-std::vector<double> progression(const sp::MeasurabilityMatrix& m, const std::vector<std::uint32_t>& order,
-                                const std::vector<double>& area, const std::vector<std::uint8_t>& mask, double of_area) {
-  std::vector<std::uint8_t> got(m.n_rows, 0);
-  std::vector<double> out;
-  double a = 0.0;
-  for (auto j : order) {
-    m.columns[j].for_each([&](std::uint32_t r) {
-      if (!got[r] && mask[r]) {
-        got[r] = 1;
-        a += area[r];
-      }
-    });
-    out.push_back(of_area > 0 ? a / of_area : 0.0);
-  }
-  return out;
-}
-
-std::size_t views_to(const std::vector<double>& prog, double target) {
-  for (std::size_t k = 0; k < prog.size(); ++k)
-    if (prog[k] >= target - 1e-9) return k + 1;
-  return 0;
-}
-
-/// Move + sweep time of views executed in least-travel order from home (their axis targets by IK).
-double cell_time_s(const sp::CellModel& cell, const std::vector<sp::Viewpoint>& views) {
-  std::vector<sp::JointVector> q;
-  double scan = 0.0;
-  for (const auto& v : views) {
-    Eigen::Isometry3d pose;
-    pose.matrix() = v.transform();
-    const auto ik = sp::inverse_kinematics(cell, pose, v.scan_length_mm);
-    if (!ik.ok) continue;
-    q.push_back(ik.q);
-    scan += sp::scan_time_s(cell, v.scan_length_mm);
-  }
-  if (q.empty()) return scan;
-  const auto order = sp::travel_order(cell, q, cell.home());
-  double move = 0.0;
-  sp::JointVector at = cell.home();
-  for (auto k : order) {
-    move += sp::move_time_s(cell, at, q[k]);
-    at = q[k];
-  }
-  return move + scan;
-}
 
 }  // namespace
 
@@ -233,81 +140,15 @@ int main(int argc, char** argv) {
         sp::TriangleMesh scene_mesh = fine.mesh();
         if (plan.cell) sp::append_mesh(scene_mesh, sp::fixture_mesh(*plan.cell));
         const sp::OcclusionScene scene(scene_mesh);
-        // The oracle in the cell's space: candidates along the fine normals (tilt clamped, the one twist); the
-        // axes must reach them and the scanner body must clear the fine object and the plate, stepping back
-        // along the boresight as the planner does. Each restriction is measured for what it costs.
-        std::vector<sp::Viewpoint> cands = oracle_candidates(fine, sensor, spec, plan.cell ? &*plan.cell : nullptr, oracle_decimation);
-        const std::size_t n_base = cands.size();
-        std::vector<std::uint8_t> usable(n_base, 1), axis_ok(n_base, 1);
-        if (plan.cell) {
-          const sp::CollisionChecker checker(*plan.cell, fine_mesh);
-          const double cap = std::min(sensor.range_max_mm, sp::max_range_for_precision_mm(sensor, spec));
-          std::vector<sp::Viewpoint> stepped;
-          for (std::size_t i = 0; i < n_base; ++i) {
-            Eigen::Isometry3d pose;
-            pose.matrix() = cands[i].transform();
-            const Eigen::Vector3d target = cands[i].position + cands[i].standoff_mm * cands[i].axis;
-            axis_ok[i] = sp::inverse_kinematics(*plan.cell, pose, cands[i].scan_length_mm).ok;
-            if (axis_ok[i] && !checker.collides(pose, cands[i].scan_length_mm)) continue;
-            usable[i] = 0;
-            for (double d : {0.5 * (cands[i].standoff_mm + cap), cap}) {
-              sp::Viewpoint v = cands[i];
-              v.standoff_mm = d;
-              v.position = target - d * v.axis;
-              v.scan_length_mm = sp::design_scan_length_mm(sensor, spec, d, std::numbers::pi / 6);
-              pose.matrix() = v.transform();
-              if (sp::inverse_kinematics(*plan.cell, pose, v.scan_length_mm).ok && !checker.collides(pose, v.scan_length_mm)) {
-                stepped.push_back(v);
-                break;
-              }
-            }
-          }
-          cands.insert(cands.end(), stepped.begin(), stepped.end());
-          usable.resize(cands.size(), 1);
-          axis_ok.resize(cands.size(), 1);
-        }
-        const auto all_m = sp::build_measurability(fine, scene, sensor, spec, cands);
-        // Reach before each restriction: no plate, plate, axis ranges, collisions (= the oracle's reach).
-        auto area_of = [&](const std::vector<std::uint8_t>& got) {
-          double a = 0.0;
-          for (std::size_t r = 0; r < fine.size(); ++r) a += got[r] ? fine.area_mm2[r] : 0.0;
-          return a;
-        };
-        std::vector<std::uint8_t> reach_noplate(fine.size(), 0), reach_plate(fine.size(), 0), reach_axes(fine.size(), 0);
-        if (plan.cell) {
-          const sp::OcclusionScene bare(fine.mesh());
-          std::vector<sp::Viewpoint> base(cands.begin(), cands.begin() + static_cast<std::ptrdiff_t>(n_base));
-          const auto nm = sp::build_measurability(fine, bare, sensor, spec, base);
-          for (const auto& c : nm.columns) c.for_each([&](std::uint32_t r) { reach_noplate[r] = 1; });
-        }
-        sp::MeasurabilityMatrix om;
-        om.n_rows = all_m.n_rows;
-        std::vector<std::size_t> om_cand;
-        for (std::size_t i = 0; i < cands.size(); ++i) {
-          if (i < n_base) all_m.columns[i].for_each([&](std::uint32_t r) { reach_plate[r] = 1; });
-          if (i < n_base && axis_ok[i]) all_m.columns[i].for_each([&](std::uint32_t r) { reach_axes[r] = 1; });
-          if (usable[i]) {
-            om.columns.push_back(all_m.columns[i]);
-            om_cand.push_back(i);
-          }
-        }
-        std::vector<std::uint8_t> reach(fine.size(), 0);
-        for (const auto& c : om.columns) c.for_each([&](std::uint32_t r) { reach[r] = 1; });
-        const double reach_area = area_of(reach);
-        const double total = fine.total_area_mm2;
-        const double lost_range = plan.cell ? 1.0 - area_of(reach_noplate) / total : 1.0 - area_of(reach_plate) / total;
-        const double lost_plate = plan.cell ? (area_of(reach_noplate) - area_of(reach_plate)) / total : 0.0;
-        const double lost_axes = (area_of(reach_plate) - area_of(reach_axes)) / total;
-        const double lost_collision = (area_of(reach_axes) - reach_area) / total;
-        sp::CoverSettings cs;
-        cs.mode = sp::CoverMode::greedy;
-        cs.eliminate_redundant = false;
-        const auto oc = sp::greedy_cover(om, fine.area_mm2, cs);
-        const auto oprog = progression(om, oc.views, fine.area_mm2, reach, reach_area);
+        const bench::CellOracle oracle =
+            bench::cell_oracle(fine_mesh, fine, scene, sensor, spec, plan.cell ? &*plan.cell : nullptr, oracle_decimation);
+        const std::vector<std::uint8_t>& reach = oracle.reach;
+        const double reach_area = oracle.reach_area_mm2;
+        const double total = oracle.total_area_mm2;
         const auto pm = sp::build_measurability(fine, scene, sensor, spec, plan.views);
         std::vector<std::uint32_t> all(plan.views.size());
         for (std::uint32_t k = 0; k < all.size(); ++k) all[k] = k;
-        const auto pprog = progression(pm, all, fine.area_mm2, reach, reach_area);
+        const auto pprog = bench::progression(pm, all, fine.area_mm2, reach, reach_area);
         const double mv = pprog.empty() ? 0.0 : pprog.back();
         // The plan's own views re-ordered greedily on the fine model: how many of them reach 99 % of the oracle's
         // reach (the rest of the plan chases the rough model's last rows).
@@ -319,7 +160,7 @@ int main(int argc, char** argv) {
           std::vector<double> masked(fine.size());
           for (std::size_t r = 0; r < fine.size(); ++r) masked[r] = reach[r] ? fine.area_mm2[r] : 0.0;
           const auto pc = sp::greedy_cover(pm, masked, gs);
-          plan99 = views_to(progression(pm, pc.views, fine.area_mm2, reach, reach_area), 0.99);
+          plan99 = bench::views_to(bench::progression(pm, pc.views, fine.area_mm2, reach, reach_area), 0.99);
         }
         // What the plan's whole candidate set could reach on the fine model: below the oracle's reach means the
         // candidates lack views; above the plan's m_v means the cover (or the rough model's estimate) fell short.
@@ -332,15 +173,11 @@ int main(int argc, char** argv) {
           cand_reach /= reach_area;
         }
         const double est = plan.cover.cumulative_fraction.empty() ? 0.0 : plan.cover.cumulative_fraction.back();
-        const std::size_t o95 = views_to(oprog, 0.95), o99 = views_to(oprog, 0.99), o999 = views_to(oprog, 0.999);
-        double plan_t = std::nan(""), oracle_t = std::nan("");
-        if (plan.cell) {
-          plan_t = plan.cell_report.travel_s + plan.cell_report.scan_s;
-          std::vector<sp::Viewpoint> ov;
-          for (std::size_t k = 0; k < std::min<std::size_t>(o99 ? o99 : oc.views.size(), oc.views.size()); ++k)
-            ov.push_back(cands[om_cand[oc.views[k]]]);
-          oracle_t = cell_time_s(*plan.cell, ov);
-        }
+        const std::size_t o95 = oracle.views_95, o99 = oracle.views_99, o999 = oracle.views_999;
+        const double plan_t = plan.cell ? plan.cell_report.travel_s + plan.cell_report.scan_s : std::nan("");
+        const double oracle_t = oracle.cell_time_s;
+        const double lost_range = oracle.lost_range, lost_plate = oracle.lost_plate, lost_axes = oracle.lost_axes,
+                     lost_collision = oracle.lost_collision;
         const std::string cname = cell ? cell->name : "free";
         const double ratio = o99 ? double(plan.views.size()) / o99 : std::nan("");
         std::printf("%-16s %-20s %6zu %6.3f %4zu/%4zu/%4zu %6zu %6zu %8.4f %8.4f %6.2f %7.1f %10.0f %10.0f  est %.4f  plan_to_99 %zu  "

@@ -1,0 +1,235 @@
+#pragma once
+// The cell oracle of issue 15, shared by bench_cell (single-shot plans) and bench_loop (the daemon's closed
+// loop): dense candidates made from the fine mesh itself in the same configuration space as the plan, with
+// the same reachability, collisions and plate, covered greedily, and judged with the plan by the analytic
+// measurability test (frustum, bi-static visibility, eq. 3.4, eq. 3.8) on the fine mesh's vertices.
+//
+// Oracle (shared/design/QUALITY-TARGETS.md): one view per K-th fine vertex along its normal at f_d·R_o, scan
+// length from the density spec; free space: 8 twists; on turntable_lift_tilt the one twist the cell reaches
+// (baseline along world +Y, camera on +X), tilt clamped to the tilt axis' range; on arm_turntable free
+// space's 8 twists (a wrist takes any); on a cell the axes must reach each and
+// the scanner body must clear the fine object and the plate, stepping back along the boresight when not.
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <numbers>
+#include <optional>
+#include <vector>
+
+#include "planner/config.hpp"
+#include "planner/core/cover.hpp"
+#include "planner/core/measurability.hpp"
+#include "planner/kinematics/cell.hpp"
+#include "planner/plan.hpp"
+
+namespace scancell::bench {
+
+namespace sp = scancell::planner;
+
+/// The oracle's candidates: one per `decimation`-th fine row, looking along the normal.
+inline std::vector<sp::Viewpoint> oracle_candidates(const sp::RoughModel& fine, const sp::SensorModel& sensor,
+                                             const sp::ModelSpec& spec, const sp::CellModel* cell, int decimation) {
+  const double standoff = 1.02 * sensor.optimal_standoff_mm;
+  const double length = sp::design_scan_length_mm(sensor, spec, standoff, std::numbers::pi / 6);
+  std::vector<sp::Viewpoint> out;
+  double tilt_max = std::numbers::pi / 2;
+  // An arm's wrist takes any twist: its oracle is free space's, then held to what the arm reaches below.
+  const bool one_twist = cell && cell->kinematics == sp::CellKinematics::turntable_lift_tilt;
+  if (one_twist) {
+    const auto& tilt = cell->axes[cell->axis_index("tilt")];
+    tilt_max = std::min(std::abs(tilt.min), std::abs(tilt.max));
+  }
+  for (std::uint32_t i = 0; i < fine.size(); i += decimation) {
+    Eigen::Vector3d b = -fine.normals[i];
+    if (!one_twist) {
+      for (int k = 0; k < 8; ++k) {
+        sp::Viewpoint v;
+        v.axis = b;
+        v.twist_rad = 2 * std::numbers::pi * k / 8;
+        v.position = fine.points[i] - b * standoff;
+        v.standoff_mm = standoff;
+        v.scan_length_mm = length;
+        v.target_row = static_cast<std::int32_t>(i);
+        out.push_back(v);
+      }
+      continue;
+    }
+    // The cell's one twist: the baseline horizontal, the camera on the far side of the boresight's horizontal
+    // part; the boresight's elevation clamped to the tilt range.
+    Eigen::Vector2d h = b.head<2>();
+    if (h.norm() < 1e-9) h = Eigen::Vector2d(-1, 0);
+    h.normalize();
+    const double elev = std::clamp(std::asin(std::clamp(b.z(), -1.0, 1.0)), -tilt_max, tilt_max);
+    b = Eigen::Vector3d(h.x() * std::cos(elev), h.y() * std::cos(elev), std::sin(elev));
+    const Eigen::Vector3d y = -Eigen::Vector3d::UnitZ().cross(b).normalized();
+    const Eigen::Vector3d z = -b;
+    const Eigen::Vector3d x = y.cross(z);
+    Eigen::Matrix3d r;
+    r.col(0) = x;
+    r.col(1) = y;
+    r.col(2) = z;
+    sp::Viewpoint v = sp::viewpoint_from_pose(r, fine.points[i] - b * standoff, length);
+    v.standoff_mm = standoff;
+    v.target_row = static_cast<std::int32_t>(i);
+    out.push_back(v);
+  }
+  return out;
+}
+
+/// Area-weighted cumulative fraction (of `of_area`) a sequence of columns covers, restricted to `mask` rows.
+inline std::vector<double> progression(const sp::MeasurabilityMatrix& m, const std::vector<std::uint32_t>& order,
+                                const std::vector<double>& area, const std::vector<std::uint8_t>& mask, double of_area) {
+  std::vector<std::uint8_t> got(m.n_rows, 0);
+  std::vector<double> out;
+  double a = 0.0;
+  for (auto j : order) {
+    m.columns[j].for_each([&](std::uint32_t r) {
+      if (!got[r] && mask[r]) {
+        got[r] = 1;
+        a += area[r];
+      }
+    });
+    out.push_back(of_area > 0 ? a / of_area : 0.0);
+  }
+  return out;
+}
+
+inline std::size_t views_to(const std::vector<double>& prog, double target) {
+  for (std::size_t k = 0; k < prog.size(); ++k)
+    if (prog[k] >= target - 1e-9) return k + 1;
+  return 0;
+}
+
+/// Move + sweep time of views executed in least-travel order from home (their axis targets by IK).
+inline double cell_time_s(const sp::CellModel& cell, const std::vector<sp::Viewpoint>& views) {
+  std::vector<sp::JointVector> q;
+  double scan = 0.0;
+  for (const auto& v : views) {
+    Eigen::Isometry3d pose;
+    pose.matrix() = v.transform();
+    const auto ik = sp::inverse_kinematics(cell, pose, v.scan_length_mm);
+    if (!ik.ok) continue;
+    q.push_back(ik.q);
+    scan += sp::scan_time_s(cell, v.scan_length_mm);
+  }
+  if (q.empty()) return scan;
+  const auto order = sp::travel_order(cell, q, cell.home());
+  double move = 0.0;
+  sp::JointVector at = cell.home();
+  for (auto k : order) {
+    move += sp::move_time_s(cell, at, q[k]);
+    at = q[k];
+  }
+  return move + scan;
+}
+
+
+/// What the oracle reaches and needs, and what the cell can never reach by cause (fractions of the fine
+/// model's whole area).
+struct CellOracle {
+  std::vector<std::uint8_t> reach;  // fine rows some oracle candidate measures
+  double reach_area_mm2 = 0.0, total_area_mm2 = 0.0;
+  double lost_range = 0.0, lost_plate = 0.0, lost_axes = 0.0, lost_collision = 0.0;
+  std::size_t views_95 = 0, views_99 = 0, views_999 = 0;  // greedy views to 95/99/99.9 % of the reach
+  double cell_time_s = std::nan("");                       // its views to 99 %, travel-ordered (cells only)
+  double reachable() const { return total_area_mm2 > 0 ? reach_area_mm2 / total_area_mm2 : 0.0; }
+};
+
+/// The oracle for the fine model `fine` (rows of `fine_mesh`) in `scene` (the fine mesh and, on a cell, the
+/// plate), on the placed `cell` or in free space.
+inline CellOracle cell_oracle(const sp::TriangleMesh& fine_mesh, const sp::RoughModel& fine, const sp::OcclusionScene& scene,
+                              const sp::SensorModel& sensor, const sp::ModelSpec& spec, const sp::CellModel* cell,
+                              int decimation) {
+  std::vector<sp::Viewpoint> cands = oracle_candidates(fine, sensor, spec, cell, decimation);
+  const std::size_t n_base = cands.size();
+  std::vector<std::uint8_t> usable(n_base, 1), axis_ok(n_base, 1);
+  if (cell) {
+    const sp::CollisionChecker checker(*cell, fine_mesh);
+    const double cap = std::min(sensor.range_max_mm, sp::max_range_for_precision_mm(sensor, spec));
+    std::vector<sp::Viewpoint> stepped;
+    for (std::size_t i = 0; i < n_base; ++i) {
+      Eigen::Isometry3d pose;
+      pose.matrix() = cands[i].transform();
+      const Eigen::Vector3d target = cands[i].position + cands[i].standoff_mm * cands[i].axis;
+      axis_ok[i] = sp::inverse_kinematics(*cell, pose, cands[i].scan_length_mm).ok;
+      if (axis_ok[i] && !checker.collides(pose, cands[i].scan_length_mm)) continue;
+      usable[i] = 0;
+      for (double d : {0.5 * (cands[i].standoff_mm + cap), cap}) {
+        sp::Viewpoint v = cands[i];
+        v.standoff_mm = d;
+        v.position = target - d * v.axis;
+        v.scan_length_mm = sp::design_scan_length_mm(sensor, spec, d, std::numbers::pi / 6);
+        pose.matrix() = v.transform();
+        if (sp::inverse_kinematics(*cell, pose, v.scan_length_mm).ok && !checker.collides(pose, v.scan_length_mm)) {
+          stepped.push_back(v);
+          break;
+        }
+      }
+    }
+    cands.insert(cands.end(), stepped.begin(), stepped.end());
+    usable.resize(cands.size(), 1);
+    axis_ok.resize(cands.size(), 1);
+  }
+  const auto all_m = sp::build_measurability(fine, scene, sensor, spec, cands);
+  // Reach before each restriction: no plate, plate, axis ranges, collisions (= the oracle's reach).
+  auto area_of = [&](const std::vector<std::uint8_t>& got) {
+    double a = 0.0;
+    for (std::size_t r = 0; r < fine.size(); ++r) a += got[r] ? fine.area_mm2[r] : 0.0;
+    return a;
+  };
+  std::vector<std::uint8_t> reach_noplate(fine.size(), 0), reach_plate(fine.size(), 0), reach_axes(fine.size(), 0);
+  if (cell) {
+    const sp::OcclusionScene bare(fine.mesh());
+    std::vector<sp::Viewpoint> base(cands.begin(), cands.begin() + static_cast<std::ptrdiff_t>(n_base));
+    const auto nm = sp::build_measurability(fine, bare, sensor, spec, base);
+    for (const auto& c : nm.columns) c.for_each([&](std::uint32_t r) { reach_noplate[r] = 1; });
+  }
+  sp::MeasurabilityMatrix om;
+  om.n_rows = all_m.n_rows;
+  std::vector<std::size_t> om_cand;
+  for (std::size_t i = 0; i < cands.size(); ++i) {
+    if (i < n_base) all_m.columns[i].for_each([&](std::uint32_t r) { reach_plate[r] = 1; });
+    if (i < n_base && axis_ok[i]) all_m.columns[i].for_each([&](std::uint32_t r) { reach_axes[r] = 1; });
+    if (usable[i]) {
+      om.columns.push_back(all_m.columns[i]);
+      om_cand.push_back(i);
+    }
+  }
+  CellOracle o;
+  o.reach.assign(fine.size(), 0);
+  for (const auto& c : om.columns) c.for_each([&](std::uint32_t r) { o.reach[r] = 1; });
+  o.reach_area_mm2 = area_of(o.reach);
+  o.total_area_mm2 = fine.total_area_mm2;
+  const double total = o.total_area_mm2;
+  o.lost_range = cell ? 1.0 - area_of(reach_noplate) / total : 1.0 - area_of(reach_plate) / total;
+  o.lost_plate = cell ? (area_of(reach_noplate) - area_of(reach_plate)) / total : 0.0;
+  o.lost_axes = (area_of(reach_plate) - area_of(reach_axes)) / total;
+  o.lost_collision = (area_of(reach_axes) - o.reach_area_mm2) / total;
+  sp::CoverSettings cs;
+  cs.mode = sp::CoverMode::greedy;
+  cs.eliminate_redundant = false;
+  const auto oc = sp::greedy_cover(om, fine.area_mm2, cs);
+  const auto oprog = progression(om, oc.views, fine.area_mm2, o.reach, o.reach_area_mm2);
+  o.views_95 = views_to(oprog, 0.95);
+  o.views_99 = views_to(oprog, 0.99);
+  o.views_999 = views_to(oprog, 0.999);
+  if (cell) {
+    std::vector<sp::Viewpoint> ov;
+    for (std::size_t k = 0; k < std::min<std::size_t>(o.views_99 ? o.views_99 : oc.views.size(), oc.views.size()); ++k)
+      ov.push_back(cands[om_cand[oc.views[k]]]);
+    o.cell_time_s = cell_time_s(*cell, ov);
+  }
+  return o;
+}
+
+/// The share of the oracle's reach that `views` measure by the analytic test on the fine rows.
+inline double mv_of_reach(const sp::RoughModel& fine, const sp::OcclusionScene& scene, const sp::SensorModel& sensor,
+                          const sp::ModelSpec& spec, const std::vector<sp::Viewpoint>& views, const CellOracle& o) {
+  if (views.empty() || o.reach_area_mm2 <= 0.0) return 0.0;
+  const auto m = sp::build_measurability(fine, scene, sensor, spec, views);
+  std::vector<std::uint32_t> all(views.size());
+  for (std::uint32_t k = 0; k < all.size(); ++k) all[k] = k;
+  return progression(m, all, fine.area_mm2, o.reach, o.reach_area_mm2).back();
+}
+
+}  // namespace scancell::bench
