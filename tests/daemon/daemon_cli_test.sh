@@ -33,6 +33,10 @@ out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
 write_config "{driver: sim}" "$JOBS, fill_sweeps: 9}"
 out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
 [ $rc = 4 ] && echo "$out" | grep -q "jobs.fill_sweeps: must be in \[0, 5\]" || fail "fill_sweeps out of range: exit $rc: $out"
+# A timeout of 0 would mean no time at all, not no limit: refused, as is one over an hour.
+write_config "{driver: sim}" "{max_rounds: 2, move_timeout_s: 0, home_timeout_s: 20}"
+out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
+[ $rc = 4 ] && echo "$out" | grep -q "jobs.move_timeout_s: must be in (0, 3600], got 0" || fail "move_timeout_s 0: exit $rc: $out"
 write_config "{driver: sim}" "$JOBS}"
 printf 'rough_scan:\n  tilts_rad: [1.15, x]\n' >> "$W/scancelld.yaml"
 out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
