@@ -70,13 +70,14 @@ std::vector<std::uint8_t> failure_counts(const std::vector<json>& round_infos, c
 }
 
 std::vector<std::uint8_t> given_up_rows(const std::vector<json>& round_infos, const std::vector<std::uint8_t>& measured,
-                                        double measured_now, int retire_after) {
+                                        double measured_now, int retire_after, double total_mm2) {
   const std::vector<std::uint8_t> fails = failure_counts(round_infos, measured);
   std::vector<std::uint8_t> out(fails.size(), 0);
   for (std::size_t r = 0; r < fails.size(); ++r) out[r] = fails[r] >= retire_after;
   if (round_infos.size() > 1) {
     const json& last = round_infos.back();
-    if (measured_now <= last.value("measured_before", 0.0) + 1e-9)
+    if (measured_now <= last.value("measured_before", 0.0) + 1e-9 ||
+        round_gains({last}, measured_now, total_mm2).back().at("under_20_percent").get<bool>())
       for (const auto row : held_rows(last))
         if (row < out.size() && !measured[row]) out[row] = 1;
   }
@@ -125,7 +126,7 @@ json closed_loop_account(const sp::RoughModel& rough, const std::vector<json>& r
   out["round_gains"] = gains;
   out["rounds_under_20_percent"] = weak;
   const auto fails = failure_counts(round_infos, measured);
-  const auto given_up = given_up_rows(round_infos, measured, measured_now, retire_after);
+  const auto given_up = given_up_rows(round_infos, measured, measured_now, retire_after, rough.total_area_mm2);
   std::size_t n = 0;
   double area = 0.0;
   std::filesystem::create_directories(dir);

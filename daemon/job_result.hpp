@@ -40,10 +40,11 @@ std::vector<std::uint32_t> held_rows(const nlohmann::json& info);
 std::vector<std::uint8_t> failure_counts(const std::vector<nlohmann::json>& round_infos, const std::vector<std::uint8_t>& measured);
 
 /// Rows the closed loop gives up on (needs attention): predicted measurable by `retire_after` executed rounds
-/// and still unmeasured, or predicted by a replanning round that measured nothing new at all — that round's
-/// predictions did not hold anywhere, and the loop stops there, so its rows are not chased again either.
+/// and still unmeasured, or predicted by a replanning round that measured nothing new at all or realized
+/// under 20 % of its predicted gain — that round's predictions did not hold, and the loop stops there, so
+/// its rows are not chased again either. `total_mm2`: the rough model's area.
 std::vector<std::uint8_t> given_up_rows(const std::vector<nlohmann::json>& round_infos, const std::vector<std::uint8_t>& measured,
-                                        double measured_now, int retire_after);
+                                        double measured_now, int retire_after, double total_mm2);
 
 /// Each executed round's predicted and realized gain (mm²): realized is what the measured coverage rose by
 /// from the round's start to the next round's start (or to `measured_now` for the last).

@@ -39,8 +39,9 @@ struct JobSettings {
   int max_rounds = 4;                              // plan rounds before a job that still lacks rows stalls
   /// The closed loop's evidence (issue 15): a row a round's views were predicted to measure and did not is
   /// down-weighted for the next plan (failed once) and, after `retire_after_failures` such rounds, retired:
-  /// reported as needing attention, never chased again. A replan whose predicted gain per view is under
-  /// `min_gain_per_view_mm2` is not executed: the job stops there.
+  /// reported as needing attention, never chased again. A replan takes no view that gains (weighted so)
+  /// under `min_gain_per_view_mm2`, and one whose predicted gain per view is under it is not executed: the
+  /// job stops there.
   int retire_after_failures = 3;
   double failed_row_weight = 0.25;
   double min_gain_per_view_mm2 = 5.0;

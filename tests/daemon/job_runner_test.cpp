@@ -442,8 +442,8 @@ TEST_F(SimCell, CubeJobMeasuresEverythingTheCellCanMeasure) {
 // Issue 15, the closed loop: the submitted mesh has a block on top that the real object lacks. Every round
 // predicts the block's rows measurable and none is ever measured. The loop must not chase them round after
 // round to jobs.max_rounds: after jobs.retire_after_failures (3) rounds, or at once when a replanning round
-// measures nothing new, they are retired as needing attention, the rounds that delivered under 20 % of their
-// prediction are named, and the job stops.
+// measures nothing new or under 20 % of its prediction, they are retired as needing attention, the rounds
+// that delivered under 20 % of their prediction are named, and the job stops.
 TEST_F(SimCell, RowsPredictedTwiceAndNeverMeasuredAreRetiredNotChased) {
   sp::TriangleMesh phantom;
   const sp::TriangleMesh cube = sp::load_mesh(write_cube(dir));
@@ -494,9 +494,15 @@ TEST_F(SimCell, RowsPredictedTwiceAndNeverMeasuredAreRetiredNotChased) {
   EXPECT_GT(block_area, 1000.0);  // of the block's 2400 mm², its top and walls above the cube
   EXPECT_GT(block_area, 0.5 * area);
   EXPECT_NEAR(area, result["needs_attention_area_mm2"].get<double>(), 1e-6 * area + 1e-9);
-  for (const auto& g : result["round_gains"])  // a round named under 20 % is one that realized under 20 %
-    EXPECT_EQ(g["under_20_percent"].get<bool>(),
-              g["realized_gain_mm2"].get<double>() < 0.2 * g["predicted_gain_mm2"].get<double>());
+  for (std::size_t k = 0; k < result["round_gains"].size(); ++k) {
+    const auto& g = result["round_gains"][k];
+    // A round named under 20 % is one that realized under 20 %, and a replanning round that did is the last:
+    // the loop stops rather than repeat it (issue 15).
+    EXPECT_EQ(g["under_20_percent"].get<bool>(), g["realized_gain_mm2"].get<double>() < 0.2 * g["predicted_gain_mm2"].get<double>());
+    if (k > 0 && g["under_20_percent"].get<bool>()) {
+      EXPECT_EQ(k + 1, result["round_gains"].size()) << result["round_gains"].dump();
+    }
+  }
   ASSERT_EQ(result["round_gains"].size(), static_cast<std::size_t>(result["rounds"].get<int>()));
   EXPECT_GT(result["round_gains"][0]["realized_gain_mm2"].get<double>(), 5000.0);  // the cube's walls and top
 }
