@@ -1,5 +1,8 @@
 #include "drivers/config.hpp"
 
+#include <algorithm>
+#include <cmath>
+
 #include "common/yaml_section.hpp"
 
 namespace scancell::drivers {
@@ -8,9 +11,9 @@ namespace {
 using scancell::Section;
 
 std::chrono::milliseconds ms(Section& s, const std::string& key, std::chrono::milliseconds fallback) {
-  const double v = s.get_or<double>(key, static_cast<double>(fallback.count()));
-  if (!(v > 0.0 && v <= 600000.0)) s.fail(s.key_path(key), "must be in (0, 600000] ms");
-  return std::chrono::milliseconds(static_cast<long>(v));
+  // (0, 10 min]; a fraction of a millisecond is one, never a zero timeout.
+  const double v = s.positive_up_to(key, static_cast<double>(fallback.count()), 600000.0);
+  return std::chrono::milliseconds(std::max(1L, std::lround(v)));
 }
 
 /// Counts per unit and profile velocity: per mm for linear axes, per rad for rotary ones; exactly one.

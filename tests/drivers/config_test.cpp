@@ -42,6 +42,12 @@ TEST(DriverConfig, ShippedSetupLoadsAndMistakesNameTheKey) {
           "give counts_per_mm (linear) or counts_per_rad (rotary)");
   refused("axes:\n  lift: {driver: profibus}\n", "axes.lift.driver: must be modbus_tcp, modbus_rtu, canopen or sim");
   refused("axes:\n  lift: {driver: sim, speed: 3}\n", "axes.lift.speed: unknown key");
+  // A timeout of 0 would be no time at all, not no limit; over ten minutes is a typo.
+  const std::string tcp = "axes:\n  lift: {driver: modbus_tcp, host: h, port: 502, unit_id: 1, counts_per_mm: 1, profile_velocity_mm_s: 1, ";
+  refused(tcp + "response_timeout_ms: 0}\n", "axes.lift.response_timeout_ms: must be in (0, 600000], got 0");
+  refused(tcp + "response_timeout_ms: 900000}\n", "axes.lift.response_timeout_ms: must be in (0, 600000], got 900000");
+  std::ofstream(dir / "d.yaml") << tcp + "response_timeout_ms: 0.4}\n";
+  EXPECT_EQ(std::get<dr::ModbusConfig>(dr::load_driver_setup(dir / "d.yaml").axes.at("lift")).response_timeout.count(), 1);
   std::filesystem::remove_all(dir);
 }
 
