@@ -1,5 +1,7 @@
 #include "drivers/sim/cia402_sim.hpp"
 
+#include <optional>
+
 #include "drivers/canopen_axis.hpp"
 
 #include <chrono>
@@ -99,6 +101,85 @@ void Cia402DriveSim::reply_sdo(std::uint8_t cmd, std::uint16_t index, std::uint8
   }
 }
 
+/// SDO upload (read) of an object this drive has; nothing for one it lacks.
+std::optional<std::uint32_t> Cia402DriveSim::upload(std::uint16_t index) const {
+  std::uint32_t v = 0;
+  switch (index) {
+    case 0x6041: v = statusword(); break;
+    case 0x6040: v = control_; break;
+    case 0x6060: case 0x6061: v = static_cast<std::uint8_t>(mode_); break;
+    case 0x607A: v = static_cast<std::uint32_t>(target_obj_); break;
+    case 0x6081: v = velocity_obj_; break;
+    case 0x6064: v = static_cast<std::uint32_t>(static_cast<std::int32_t>(std::lround(pos_))); break;
+    case 0x606C: v = static_cast<std::uint32_t>(static_cast<std::int32_t>(std::lround(vel_))); break;
+    case 0x603F: v = error_code_; break;
+    default: return std::nullopt;
+  }
+  return v;
+}
+
+/// A controlword (0x6040) written: the CiA 402 state machine, and in operation enabled a new set-point on
+/// bit 4's rising edge (profile position: a move; homing: the homing run).
+void Cia402DriveSim::controlword(std::uint16_t value) {
+  const std::uint16_t prev = control_;
+  control_ = static_cast<std::uint16_t>(value);
+  const bool rising4 = (control_ & 0x10) && !(prev & 0x10);
+  if ((control_ & 0x80) && !(prev & 0x80)) {  // fault reset
+    if (state_ == State::fault) state_ = State::disabled, error_code_ = 0, following_ = false;
+    return;
+  }
+  if (state_ == State::fault) return;
+  if ((control_ & 0x87) == 0x02 || (control_ & 0x82) == 0x00) {  // quick stop or disable voltage
+    moving_ = false;
+    vel_ = 0.0;
+    target_ = static_cast<std::int32_t>(std::lround(pos_));
+    pos_ = target_;
+    reached_ = true;
+    state_ = State::disabled;
+    return;
+  }
+  if ((control_ & 0x87) == 0x06) state_ = State::ready;
+  else if ((control_ & 0x8F) == 0x07 && state_ == State::ready) state_ = State::switched_on;
+  else if ((control_ & 0x8F) == 0x0F && (state_ == State::switched_on || state_ == State::enabled)) state_ = State::enabled;
+  if (state_ != State::enabled) return;
+  if (control_ & 0x100) {  // halt
+    moving_ = false;
+    vel_ = 0.0;
+    target_ = static_cast<std::int32_t>(std::lround(pos_));
+    pos_ = target_;
+    reached_ = true;
+    return;
+  }
+  if (!(control_ & 0x10)) {
+    if (mode_ == 1) ack_ = false;
+    return;
+  }
+  if (!rising4) return;
+  if (mode_ == 6) {
+    homing_left_ = p_.home_time_s;
+    ack_ = false;
+    reached_ = false;
+  } else if (mode_ == 1) {
+    if (target_obj_ < p_.min_counts || target_obj_ > p_.max_counts) {
+      ++violations_;
+      state_ = State::fault;
+      error_code_ = 0x8612;  // reference limit
+      return;
+    }
+    ack_ = true;
+    if (fault_ == CanFault::following_error) {
+      fault_ = CanFault::none;
+      following_ = true;
+      state_ = State::fault;
+      error_code_ = 0x8611;  // following error
+      return;
+    }
+    target_ = target_obj_;
+    moving_ = std::lround(pos_) != target_;
+    reached_ = !moving_;
+  }
+}
+
 void Cia402DriveSim::on_frame(const can_frame& frame) {
   const unsigned char* d = frame.data;
   const std::uint32_t id = frame.can_id;
@@ -115,19 +196,9 @@ void Cia402DriveSim::on_frame(const can_frame& frame) {
   }
   const int ccs = d[0] >> 5;
   if (ccs == 2) {  // upload
-    std::uint32_t v = 0;
-    switch (index) {
-      case 0x6041: v = statusword(); break;
-      case 0x6040: v = control_; break;
-      case 0x6060: case 0x6061: v = static_cast<std::uint8_t>(mode_); break;
-      case 0x607A: v = static_cast<std::uint32_t>(target_obj_); break;
-      case 0x6081: v = velocity_obj_; break;
-      case 0x6064: v = static_cast<std::uint32_t>(static_cast<std::int32_t>(std::lround(pos_))); break;
-      case 0x606C: v = static_cast<std::uint32_t>(static_cast<std::int32_t>(std::lround(vel_))); break;
-      case 0x603F: v = error_code_; break;
-      default: reply_sdo(0x80, index, sub, kAbortNoObject); return;
-    }
-    reply_sdo(0x43, index, sub, v);
+    const auto v = upload(index);
+    if (v) reply_sdo(0x43, index, sub, *v);
+    else reply_sdo(0x80, index, sub, kAbortNoObject);
     return;
   }
   if (ccs != 1) {
@@ -136,66 +207,7 @@ void Cia402DriveSim::on_frame(const can_frame& frame) {
   }
   log_.push_back({index, value});
   switch (index) {
-    case 0x6040: {
-      const std::uint16_t prev = control_;
-      control_ = static_cast<std::uint16_t>(value);
-      const bool rising4 = (control_ & 0x10) && !(prev & 0x10);
-      if ((control_ & 0x80) && !(prev & 0x80)) {  // fault reset
-        if (state_ == State::fault) state_ = State::disabled, error_code_ = 0, following_ = false;
-        break;
-      }
-      if (state_ == State::fault) break;
-      if ((control_ & 0x87) == 0x02 || (control_ & 0x82) == 0x00) {  // quick stop or disable voltage
-        moving_ = false;
-        vel_ = 0.0;
-        target_ = static_cast<std::int32_t>(std::lround(pos_));
-        pos_ = target_;
-        reached_ = true;
-        state_ = State::disabled;
-        break;
-      }
-      if ((control_ & 0x87) == 0x06) state_ = State::ready;
-      else if ((control_ & 0x8F) == 0x07 && state_ == State::ready) state_ = State::switched_on;
-      else if ((control_ & 0x8F) == 0x0F && (state_ == State::switched_on || state_ == State::enabled)) state_ = State::enabled;
-      if (state_ != State::enabled) break;
-      if (control_ & 0x100) {  // halt
-        moving_ = false;
-        vel_ = 0.0;
-        target_ = static_cast<std::int32_t>(std::lround(pos_));
-        pos_ = target_;
-        reached_ = true;
-        break;
-      }
-      if (!(control_ & 0x10)) {
-        if (mode_ == 1) ack_ = false;
-        break;
-      }
-      if (!rising4) break;
-      if (mode_ == 6) {
-        homing_left_ = p_.home_time_s;
-        ack_ = false;
-        reached_ = false;
-      } else if (mode_ == 1) {
-        if (target_obj_ < p_.min_counts || target_obj_ > p_.max_counts) {
-          ++violations_;
-          state_ = State::fault;
-          error_code_ = 0x8612;  // reference limit
-          break;
-        }
-        ack_ = true;
-        if (fault_ == CanFault::following_error) {
-          fault_ = CanFault::none;
-          following_ = true;
-          state_ = State::fault;
-          error_code_ = 0x8611;  // following error
-          break;
-        }
-        target_ = target_obj_;
-        moving_ = std::lround(pos_) != target_;
-        reached_ = !moving_;
-      }
-      break;
-    }
+    case 0x6040: controlword(static_cast<std::uint16_t>(value)); break;
     case 0x6060: mode_ = static_cast<std::int8_t>(value & 0xFF); break;
     case 0x607A: target_obj_ = static_cast<std::int32_t>(value); break;
     case 0x6081: velocity_obj_ = value; break;

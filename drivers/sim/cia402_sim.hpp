@@ -6,6 +6,7 @@
 #include <atomic>
 #include <cstdint>
 #include <mutex>
+#include <optional>
 #include <thread>
 #include <vector>
 
@@ -44,6 +45,8 @@ class Cia402DriveSim {
   void run();
   void step(double dt);
   void on_frame(const can_frame& frame);
+  std::optional<std::uint32_t> upload(std::uint16_t index) const;  // SDO read; nothing: no such object
+  void controlword(std::uint16_t value);                           // 0x6040 written: the state machine
   void reply_sdo(std::uint8_t cmd, std::uint16_t index, std::uint8_t sub, std::uint32_t value);
   std::uint16_t statusword() const;
 

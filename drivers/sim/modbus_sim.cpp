@@ -151,9 +151,10 @@ unsigned ModbusDriveSim::refuse_write(void* ctxv, const std::uint8_t* req, int l
   return 0;
 }
 
-bool ModbusDriveSim::handle(void* ctxv, const std::uint8_t* req, int len) {
+/// An injected fault that answers the request itself, or withholds the answer: true when it did. A late
+/// reply only waits, then the request is answered as usual.
+bool ModbusDriveSim::answer_fault(void* ctxv, const std::uint8_t* req, ModbusFault f) {
   auto* ctx = static_cast<modbus_t*>(ctxv);
-  const ModbusFault f = fault_;
   if (f == ModbusFault::no_reply) return true;
   if (f == ModbusFault::illegal_address) {
     modbus_reply_exception(ctx, req, MODBUS_EXCEPTION_ILLEGAL_DATA_ADDRESS);
@@ -193,6 +194,60 @@ bool ModbusDriveSim::handle(void* ctxv, const std::uint8_t* req, int len) {
     modbus_reply_exception(ctx, req, MODBUS_EXCEPTION_SLAVE_OR_SERVER_BUSY);
     return true;
   }
+  return false;
+}
+
+/// A command written to the command register, executed as a drive does (under mu_); false: drop the
+/// connection (an injected fault).
+bool ModbusDriveSim::execute(std::uint16_t cmd, std::int32_t target, ModbusFault f) {
+  bool keep = true;
+  switch (cmd) {
+    case mm::kEnable: enabled_ = true; break;
+    case mm::kDisable: enabled_ = false; moving_ = false; vel_ = 0.0; break;
+    case mm::kHome:
+      if (!enabled_) { fault_bit_ = true; fault_code_ = mm::kNotEnabled; break; }
+      homing_left_ = p_.home_time_s;
+      break;
+    case mm::kMove:
+      if (target < p_.min_counts || target > p_.max_counts) {
+        ++violations_;  // the driver must never send this: the tests assert it stays 0
+        fault_bit_ = true;
+        fault_code_ = mm::kLimitHit;
+        break;
+      }
+      if (!enabled_ || !homed_) { fault_bit_ = true; fault_code_ = enabled_ ? mm::kNotHomed : mm::kNotEnabled; break; }
+      if (f == ModbusFault::following_error) {
+        fault_ = ModbusFault::none;
+        fault_bit_ = true;
+        fault_code_ = mm::kFollowingError;
+        break;
+      }
+      target_ = target;
+      moving_ = std::lround(pos_) != target_;
+      stalled_ = f == ModbusFault::stall;
+      if (f == ModbusFault::drop_connection) {
+        fault_ = ModbusFault::none;
+        keep = false;
+      }
+      break;
+    case mm::kStop:
+    case mm::kHalt:
+      target_ = static_cast<std::int32_t>(std::lround(pos_));
+      pos_ = target_;
+      moving_ = false;
+      vel_ = 0.0;
+      stalled_ = false;
+      break;
+    case mm::kResetFault: fault_bit_ = false; fault_code_ = mm::kNoFault; break;
+    default: break;
+  }
+  return keep;
+}
+
+bool ModbusDriveSim::handle(void* ctxv, const std::uint8_t* req, int len) {
+  auto* ctx = static_cast<modbus_t*>(ctxv);
+  const ModbusFault f = fault_;
+  if (answer_fault(ctx, req, f)) return true;
   // As strict as a drive: a write that touches a read-only register (status, actual position and velocity,
   // fault code, heartbeat) is answered with exception 2, and a negative profile velocity with exception 3;
   // neither changes anything.
@@ -201,59 +256,15 @@ bool ModbusDriveSim::handle(void* ctxv, const std::uint8_t* req, int len) {
     modbus_reply_exception(ctx, req, refused);
     return true;
   }
-  bool keep = true;
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    modbus_reply(ctx, req, len, map_of(mapping_));
-    auto* regs = map_of(mapping_)->tab_registers;
-    const std::uint16_t cmd = regs[mm::kCommand];
-    if (cmd != mm::kNone) {
-      regs[mm::kCommand] = mm::kNone;
-      const std::int32_t target = mm::get_i32(regs, mm::kTargetHi);
-      log_.push_back({cmd, target});
-      switch (cmd) {
-        case mm::kEnable: enabled_ = true; break;
-        case mm::kDisable: enabled_ = false; moving_ = false; vel_ = 0.0; break;
-        case mm::kHome:
-          if (!enabled_) { fault_bit_ = true; fault_code_ = mm::kNotEnabled; break; }
-          homing_left_ = p_.home_time_s;
-          break;
-        case mm::kMove:
-          if (target < p_.min_counts || target > p_.max_counts) {
-            ++violations_;  // the driver must never send this: the tests assert it stays 0
-            fault_bit_ = true;
-            fault_code_ = mm::kLimitHit;
-            break;
-          }
-          if (!enabled_ || !homed_) { fault_bit_ = true; fault_code_ = enabled_ ? mm::kNotHomed : mm::kNotEnabled; break; }
-          if (f == ModbusFault::following_error) {
-            fault_ = ModbusFault::none;
-            fault_bit_ = true;
-            fault_code_ = mm::kFollowingError;
-            break;
-          }
-          target_ = target;
-          moving_ = std::lround(pos_) != target_;
-          stalled_ = f == ModbusFault::stall;
-          if (f == ModbusFault::drop_connection) {
-            fault_ = ModbusFault::none;
-            keep = false;
-          }
-          break;
-        case mm::kStop:
-        case mm::kHalt:
-          target_ = static_cast<std::int32_t>(std::lround(pos_));
-          pos_ = target_;
-          moving_ = false;
-          vel_ = 0.0;
-          stalled_ = false;
-          break;
-        case mm::kResetFault: fault_bit_ = false; fault_code_ = mm::kNoFault; break;
-        default: break;
-      }
-    }
-  }
-  return keep;
+  std::lock_guard<std::mutex> lock(mu_);
+  modbus_reply(ctx, req, len, map_of(mapping_));
+  auto* regs = map_of(mapping_)->tab_registers;
+  const std::uint16_t cmd = regs[mm::kCommand];
+  if (cmd == mm::kNone) return true;
+  regs[mm::kCommand] = mm::kNone;
+  const std::int32_t target = mm::get_i32(regs, mm::kTargetHi);
+  log_.push_back({cmd, target});
+  return execute(cmd, target, f);
 }
 
 void ModbusDriveSim::run_tcp(int listen_fd) {

@@ -64,6 +64,10 @@ class ModbusDriveSim {
   void run_rtu(int master_fd);
   /// One request: returns false when the connection should be closed.
   bool handle(void* ctx, const std::uint8_t* req, int len);
+  /// An injected fault that answers (or withholds) the reply itself: true when it did.
+  bool answer_fault(void* ctx, const std::uint8_t* req, ModbusFault f);
+  /// A command from the command register, executed (under mu_): false when the connection should be closed.
+  bool execute(std::uint16_t cmd, std::int32_t target, ModbusFault f);
   /// The Modbus exception code a drive answers this write with, or 0 to accept it.
   unsigned refuse_write(void* ctx, const std::uint8_t* req, int len) const;
   void step(double dt);
