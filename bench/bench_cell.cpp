@@ -36,6 +36,8 @@
 #include "planner/core/measurability.hpp"
 #include "planner/plan.hpp"
 #include "planner/sim/synthetic.hpp"
+#include "bench_common.hpp"
+#include "bench_objects.hpp"
 #include "cell_oracle.hpp"
 
 namespace sp = scancell::planner;
@@ -46,11 +48,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
-
-struct Object {
-  std::string name;
-  std::function<sp::TriangleMesh()> make;
-};
 
 }  // namespace
 
@@ -64,13 +61,7 @@ int main(int argc, char** argv) {
   double refine_mm = 2.0;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::cerr << a << " needs a value\n";
-        std::exit(2);
-      }
-      return argv[++i];
-    };
+    auto value = [&] { return bench::option_value(argc, argv, i); };
     if (a == "--meshes") meshes_dir = value();
     else if (a == "--csv") csv_path = value();
     else if (a == "--cell") cells.push_back(value());
@@ -94,20 +85,8 @@ int main(int argc, char** argv) {
   auto settings = sp::load_planner_settings(settings_file);
   settings.keep_candidates = true;
 
-  std::vector<Object> objects;
-  std::vector<fs::path> files;
-  if (fs::is_directory(meshes_dir))
-    for (const auto& e : fs::directory_iterator(meshes_dir))
-      if (e.path().extension() == ".off") files.push_back(e.path());
-  std::sort(files.begin(), files.end());
-  for (const auto& f : files)
-    objects.push_back({f.stem().string(), [f, refine_mm] {
-                         sp::TriangleMesh m = sp::load_mesh(f);
-                         sp::apply_scale(m, sp::fit_scale(m, 200.0));
-                         return refine_mm > 0.0 ? sp::refine_edges(m, refine_mm) : m;
-                       }});
-  objects.push_back({"box-blind-hole", [] { return sp::box_with_blind_hole({120, 80, 60}, 30, 30, 3.0); }});
-  objects.push_back({"tube-bore", [] { return sp::cylinder_with_bore(80, 50, 50, 3.0); }});
+  std::vector<bench::BenchObject> objects = bench::shared_mesh_objects(meshes_dir, refine_mm);
+  for (auto& o : bench::cad_objects(3.0)) objects.push_back(std::move(o));
 
   const int n_threads = threads > 0 ? threads : tbb::info::default_concurrency();
   tbb::task_arena arena(n_threads);

@@ -28,6 +28,7 @@
 #include <tbb/task_arena.h>
 
 #include "bench_common.hpp"
+#include "bench_objects.hpp"
 #include "cell_oracle.hpp"
 #include "common/json_matrix.hpp"
 #include "daemon/cell_io.hpp"
@@ -42,11 +43,6 @@ namespace fs = std::filesystem;
 using scancell::bench::CellOracle;
 
 namespace {
-
-struct Object {
-  std::string name;
-  std::function<sp::TriangleMesh()> make;
-};
 
 /// The views a job executed and stored, per round (round ≥ 0: not a rough scan's), in the object frame.
 std::vector<std::vector<sp::Viewpoint>> executed_views(dm::Journal& journal, std::int64_t job) {
@@ -86,13 +82,7 @@ int main(int argc, char** argv) {
   std::string placement;  // auto | as_given; empty: the shipped settings' placement.mode
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::cerr << a << " needs a value\n";
-        std::exit(2);
-      }
-      return argv[++i];
-    };
+    auto value = [&] { return scancell::bench::option_value(argc, argv, i); };
     if (a == "--meshes") meshes_dir = value();
     else if (a == "--csv") csv_path = value();
     else if (a == "--keep") keep_dir = value();
@@ -130,20 +120,8 @@ int main(int argc, char** argv) {
     return 2;
   }
 
-  std::vector<Object> objects;
-  std::vector<fs::path> files;
-  if (fs::is_directory(meshes_dir))
-    for (const auto& e : fs::directory_iterator(meshes_dir))
-      if (e.path().extension() == ".off") files.push_back(e.path());
-  std::sort(files.begin(), files.end());
-  for (const auto& f : files)
-    objects.push_back({f.stem().string(), [f, refine_mm] {
-                         sp::TriangleMesh m = sp::load_mesh(f);
-                         sp::apply_scale(m, sp::fit_scale(m, 200.0));
-                         return refine_mm > 0.0 ? sp::refine_edges(m, refine_mm) : m;
-                       }});
-  objects.push_back({"box-blind-hole", [] { return sp::box_with_blind_hole({120, 80, 60}, 30, 30, 3.0); }});
-  objects.push_back({"tube-bore", [] { return sp::cylinder_with_bore(80, 50, 50, 3.0); }});
+  std::vector<scancell::bench::BenchObject> objects = scancell::bench::shared_mesh_objects(meshes_dir, refine_mm);
+  for (auto& o : scancell::bench::cad_objects(3.0)) objects.push_back(std::move(o));
 
   const fs::path work = keep_dir.empty() ? fs::temp_directory_path() / ("bench_loop_" + std::to_string(::getpid())) : fs::path(keep_dir);
   fs::create_directories(work);

@@ -31,8 +31,11 @@
 #include "planner/plan.hpp"
 #include "planner/sim/synthetic.hpp"
 #include "planner/sim/verify.hpp"
+#include "bench_common.hpp"
+#include "bench_objects.hpp"
 
 namespace sp = scancell::planner;
+namespace bench = scancell::bench;
 namespace fs = std::filesystem;
 
 namespace {
@@ -90,10 +93,7 @@ int main(int argc, char** argv) {
   std::string settings_file;       // planner settings for 3M (cover mode and t_r are set per method)
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) { std::cerr << a << " needs a value\n"; std::exit(2); }
-      return argv[++i];
-    };
+    auto value = [&] { return bench::option_value(argc, argv, i); };
     if (a == "--meshes") meshes_dir = value();
     else if (a == "--csv") csv_path = value();
     else if (a == "--refine-mm") refine_mm = std::stod(value());
@@ -127,19 +127,8 @@ int main(int argc, char** argv) {
                          return sp::cavity_patch(plate, 0.8 * plate, dw, 0.5);
                        }});
   }
-  objects.push_back({"box-blind-hole", [] { return sp::box_with_blind_hole({120, 80, 60}, 30, 30, 1.5); }});
-  objects.push_back({"tube-bore", [] { return sp::cylinder_with_bore(80, 50, 50, 1.5); }});
-  std::vector<fs::path> files;
-  if (fs::is_directory(meshes_dir))
-    for (const auto& e : fs::directory_iterator(meshes_dir))
-      if (e.path().extension() == ".off") files.push_back(e.path());
-  std::sort(files.begin(), files.end());
-  for (const auto& f : files)
-    objects.push_back({f.stem().string(), [f, refine_mm] {
-                         sp::TriangleMesh m = sp::load_mesh(f);
-                         sp::apply_scale(m, sp::fit_scale(m, 200.0));
-                         return refine_mm > 0.0 ? sp::refine_edges(m, refine_mm) : m;
-                       }});
+  for (auto& o : bench::cad_objects(1.5)) objects.push_back({o.name, std::move(o.make)});
+  for (auto& o : bench::shared_mesh_objects(meshes_dir, refine_mm)) objects.push_back({o.name, std::move(o.make)});
 
   const int n_threads = threads > 0 ? threads : tbb::info::default_concurrency();
   tbb::task_arena arena(n_threads);

@@ -1,0 +1,45 @@
+#pragma once
+// The objects the quality benches plan for: every shared mesh (CGAL sample data, arbitrary units) scaled to
+// a 200 mm longest side with its edges refined, and the two CAD parts of planner/sim/synthetic.hpp.
+#include <algorithm>
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "planner/geometry/mesh.hpp"
+#include "planner/sim/synthetic.hpp"
+
+namespace scancell::bench {
+
+struct BenchObject {
+  std::string name;
+  std::function<planner::TriangleMesh()> make;  // made when its turn comes (fine meshes are large)
+};
+
+/// Every .off in `dir`, in name order, scaled to a 200 mm longest side and its edges refined to
+/// `refine_mm` (0: as given); none when `dir` is not a directory.
+inline std::vector<BenchObject> shared_mesh_objects(const std::filesystem::path& dir, double refine_mm) {
+  std::vector<std::filesystem::path> files;
+  if (std::filesystem::is_directory(dir))
+    for (const auto& e : std::filesystem::directory_iterator(dir))
+      if (e.path().extension() == ".off") files.push_back(e.path());
+  std::sort(files.begin(), files.end());
+  std::vector<BenchObject> out;
+  for (const auto& f : files)
+    out.push_back({f.stem().string(), [f, refine_mm] {
+                     planner::TriangleMesh m = planner::load_mesh(f);
+                     planner::apply_scale(m, planner::fit_scale(m, 200.0));
+                     return refine_mm > 0.0 ? planner::refine_edges(m, refine_mm) : m;
+                   }});
+  return out;
+}
+
+/// The CAD parts: a 120×80×60 mm box with a Ø30×30 blind hole, and a Ø80×50 tube with a Ø50 bore, edges
+/// refined to `edge_mm`.
+inline std::vector<BenchObject> cad_objects(double edge_mm) {
+  return {{"box-blind-hole", [edge_mm] { return planner::box_with_blind_hole({120, 80, 60}, 30, 30, edge_mm); }},
+          {"tube-bore", [edge_mm] { return planner::cylinder_with_bore(80, 50, 50, edge_mm); }}};
+}
+
+}  // namespace scancell::bench
