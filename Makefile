@@ -5,7 +5,7 @@ JOBS       ?= $(shell nproc)
 CMAKE      ?= cmake
 SCANCELL    = $(BUILD)/tools/scancell
 
-.PHONY: all deps build test test-asan fuzz demo demo-rough demo-flip demo-gige demo-offline kill-test bench quality quality-cell monitor monitor-check clean
+.PHONY: all deps build test test-asan fuzz demo demo-rough demo-flip demo-gige demo-offline kill-test bench quality quality-cell quality-loop monitor monitor-check clean
 
 all: build
 
@@ -101,6 +101,10 @@ quality: build
 # Plans against an oracle in the same configuration space, free space and the turntable cell (bench/bench_cell.cpp).
 quality-cell: build
 	cd $(BUILD) && ./bench/bench_cell --csv quality-cell.csv
+
+# The daemon's closed loop (whole jobs on the demo cell) against the same cell oracle (bench/bench_loop.cpp).
+quality-loop: build
+	cd $(BUILD) && ./bench/bench_loop --csv quality-loop.csv
 
 clean:
 	rm -rf $(BUILD) $(ASAN_BUILD) $(BUILD).configure.log $(ASAN_BUILD).configure.log
