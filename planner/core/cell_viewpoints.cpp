@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <optional>
 
 #include <tbb/parallel_for.h>
 
@@ -40,13 +41,92 @@ Eigen::Vector3d aim(const Eigen::Vector3d& b, double elev, double yaw) {
 
 }  // namespace
 
-bool has_cell_native_viewpoints(const CellModel& cell) { return cell.kinematics == CellKinematics::turntable_lift_tilt; }
+bool has_cell_native_viewpoints(const CellModel& cell) {
+  return cell.kinematics == CellKinematics::turntable_lift_tilt || cell.kinematics == CellKinematics::arm_turntable;
+}
+
+namespace {
+
+/// arm_turntable: the wrist takes any twist, so every free candidate (each twist and bisector tilt of each
+/// optimal-zone position) is a pose the cell may take as it is. Where the arm cannot reach it or the scanner
+/// body would hit the object or the plate, it steps back along its boresight towards the precision-limited
+/// range; a view looking up at a face turned to the plate, when no stand-off works, is lowered by
+/// `cell_oblique_rad` towards the horizontal about the target (the plate blocks the view from below).
+std::vector<Viewpoint> arm_viewpoints(const std::vector<Viewpoint>& seeds, const SensorModel& sensor,
+                                      const ModelSpec& spec, const ViewpointSettings& st, const CellModel& cell,
+                                      const CollisionChecker& checker, CellGenerationReport& rep) {
+  const double range_cap = std::min(sensor.range_max_mm, max_range_for_precision_mm(sensor, spec));
+  const Eigen::Matrix3d object_to_table = cell.object_on_table.linear();
+  struct Out {
+    std::optional<Viewpoint> view;
+    bool stepped = false, reachable = false;
+  };
+  std::vector<Out> per(seeds.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, seeds.size(), 16), [&](const auto& range) {
+    for (std::size_t k = range.begin(); k != range.end(); ++k) {
+      const Viewpoint& seed = seeds[k];
+      const Eigen::Vector3d target = seed.position + seed.standoff_mm * seed.axis;
+      // The seed's own rotation, then (looking up) the same lowered towards the horizontal.
+      std::vector<Eigen::Matrix3d> rotations = {seed.rotation()};
+      const Eigen::Vector3d b_table = object_to_table * seed.axis;
+      if (b_table.z() > std::sin(st.cell_oblique_rad)) {
+        const Eigen::Vector3d about = object_to_table.transpose() * b_table.cross(Eigen::Vector3d::UnitZ()).normalized();
+        rotations.push_back(Eigen::AngleAxisd(st.cell_oblique_rad, about).toRotationMatrix() * seed.rotation());
+      }
+      Out& o = per[k];
+      for (const Eigen::Matrix3d& r : rotations) {
+        const Eigen::Vector3d b = -r.col(2);
+        for (int step = 0; step < std::max(1, st.cell_standoff_steps) && !o.view; ++step) {
+          const double standoff =
+              st.cell_standoff_steps <= 1 ? seed.standoff_mm
+                                          : seed.standoff_mm + (range_cap - seed.standoff_mm) * step / (st.cell_standoff_steps - 1);
+          if (step > 0 && standoff <= seed.standoff_mm) break;
+          const double scan = step == 0 ? seed.scan_length_mm
+                                        : design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad);
+          Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+          pose.linear() = r;
+          pose.translation() = target - standoff * b;
+          if (!inverse_kinematics(cell, pose, scan).ok) continue;
+          o.reachable = true;
+          if (checker.collides(pose, scan)) continue;
+          Viewpoint v = viewpoint_from_pose(r, pose.translation(), scan);
+          v.standoff_mm = standoff;
+          v.target_row = seed.target_row;
+          v.twist_level = seed.twist_level;
+          v.tilt_rad = seed.tilt_rad;
+          o.view = v;
+          o.stepped = step > 0 || &r != &rotations.front();
+        }
+        if (o.view) break;
+      }
+    }
+  });
+  std::vector<Viewpoint> out;
+  for (const auto& o : per) {
+    if (o.view) {
+      out.push_back(*o.view);
+      rep.stepped_back += o.stepped;
+    } else {
+      ++(o.reachable ? rep.colliding : rep.unreachable);
+    }
+  }
+  return out;
+}
+
+}  // namespace
 
 std::vector<Viewpoint> cell_viewpoints(const RoughModel& rough, const std::vector<Viewpoint>& seeds,
                                        const SensorModel& sensor, const ModelSpec& spec,
                                        const ViewpointSettings& st, const CellModel& cell,
                                        const CollisionChecker& checker, CellGenerationReport* report) {
   CellGenerationReport rep;
+  if (cell.kinematics == CellKinematics::arm_turntable) {
+    rep.seeds = seeds.size();
+    std::vector<Viewpoint> out = arm_viewpoints(seeds, sensor, spec, st, cell, checker, rep);
+    rep.candidates = out.size();
+    if (report) *report = rep;
+    return out;
+  }
   // One seed per optimal-zone position: the untilted, first-twist free candidate of each target row.
   std::vector<const Viewpoint*> positions;
   {

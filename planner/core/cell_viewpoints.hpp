@@ -18,6 +18,10 @@
 // - each with the one twist the cell reaches (the other sign when the first is out of reach), and, when
 //   the scanner body would hit the object or the plate, stepped back along the boresight (the stand-off
 //   grows towards the precision-limited range) rather than dropped.
+// arm_turntable: the wrist takes any twist, so every free candidate is a pose the cell may take as it is;
+// one the arm cannot reach or whose scanner body hits the object or the plate steps back along its
+// boresight the same way, and one looking up at a face turned to the plate is also tried lowered by
+// `oblique_rad` towards the horizontal (thesis 6.3.2 would drop both).
 #include <cstdint>
 #include <vector>
 
@@ -37,12 +41,12 @@ struct CellGenerationReport {
   std::size_t colliding = 0;     // collides at every stand-off tried
 };
 
-/// Whether `cell` gets cell-native candidates (turntable_lift_tilt); other kinematics project free ones.
+/// Whether `cell` gets cell-native candidates (turntable_lift_tilt, arm_turntable); others project free ones.
 bool has_cell_native_viewpoints(const CellModel& cell);
 
-/// Cell-native candidates from the optimal-zone positions of `seeds` (free-space candidates: one per target
-/// row is used, its stand-off and target); settings.cell_oblique_rad and cell_standoff_steps shape the
-/// expansion. Deterministic; parallel over seeds.
+/// Cell-native candidates from the optimal-zone positions of `seeds` (free-space candidates: on
+/// turntable_lift_tilt one per target row is used, its stand-off and target; on arm_turntable each);
+/// settings.cell_oblique_rad and cell_standoff_steps shape the expansion. Deterministic; parallel over seeds.
 std::vector<Viewpoint> cell_viewpoints(const RoughModel& rough, const std::vector<Viewpoint>& seeds,
                                        const SensorModel& sensor, const ModelSpec& spec,
                                        const ViewpointSettings& settings, const CellModel& cell,

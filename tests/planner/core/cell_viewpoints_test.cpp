@@ -90,3 +90,48 @@ TEST(CellViewpoints, TheBisectorPairStraddlesAWallsNormalByHalfTheTriangulationA
   }
   EXPECT_GT(pairs, 5u);
 }
+
+// arm_turntable: the wrist takes any twist, so a free candidate is kept as it is where the arm reaches it
+// with the scanner body clear; where not, it steps back along its own boresight (same target, same
+// orientation, a longer stand-off) instead of being dropped as projection (thesis 6.3.2) drops it.
+TEST(CellViewpoints, TheArmKeepsFreeCandidatesAndStepsBackTheOnesThatWouldHitThePlate) {
+  const sp::CellModel cell = sp::load_cell(sp::testing::source_path("config/cells/arm-turntable.yaml"));
+  const sp::SensorModel sensor = sp::testing::thesis_sensor();
+  const sp::ModelSpec spec = sp::testing::thesis_spec();
+  sp::ViewpointSettings settings;
+  settings.position_decimation = 2;
+  sp::TriangleMesh box;
+  sp::testing::add_box(box, {-50, -50, 0}, {50, 50, 30}, 10);  // low on the plate: its walls' views graze it
+  const sp::RoughModel rough = sp::make_rough_model(box);
+  const sp::OcclusionScene scene(sp::with_fixtures(rough.mesh(), cell));
+  const auto seeds = sp::generate_viewpoints(rough, scene, sensor, spec, settings);
+  const sp::CollisionChecker checker(cell, rough.mesh());
+  sp::CellGenerationReport report;
+  const auto views = sp::cell_viewpoints(rough, seeds, sensor, spec, settings, cell, checker, &report);
+  ASSERT_TRUE(sp::has_cell_native_viewpoints(cell));
+  EXPECT_EQ(report.seeds, seeds.size());
+  EXPECT_EQ(report.candidates, views.size());
+  EXPECT_EQ(report.candidates + report.unreachable + report.colliding, seeds.size());
+  // What projection would keep: the seeds the arm reaches exactly with the body clear.
+  std::size_t as_is = 0;
+  for (const auto& s : seeds) {
+    Eigen::Isometry3d p;
+    p.matrix() = s.transform();
+    as_is += sp::inverse_kinematics(cell, p, s.scan_length_mm).ok && !checker.collides(p, s.scan_length_mm);
+  }
+  EXPECT_GT(report.stepped_back, 0u);
+  EXPECT_EQ(views.size(), as_is + report.stepped_back);
+  std::size_t stepped = 0;
+  for (const auto& v : views) {
+    Eigen::Isometry3d p;
+    p.matrix() = v.transform();
+    ASSERT_TRUE(sp::inverse_kinematics(cell, p, v.scan_length_mm).ok);
+    EXPECT_FALSE(checker.collides(p, v.scan_length_mm));
+    // Every view still aims at its target row at its own stand-off.
+    const Eigen::Vector3d target = rough.points[static_cast<std::size_t>(v.target_row)];
+    EXPECT_NEAR((target - v.position).norm(), v.standoff_mm, 1e-6);
+    EXPECT_NEAR((target - v.position).normalized().dot(v.axis), 1.0, 1e-9);
+    stepped += v.standoff_mm > sensor.optimal_standoff_mm * settings.standoff_factor + 1.0;
+  }
+  EXPECT_GT(stepped, 0u);
+}
