@@ -62,6 +62,7 @@ DriverSetup load_driver_setup(const std::filesystem::path& file) {
         c.transport = ModbusConfig::Transport::rtu;
         c.device = a.get<std::string>("device");
         c.baud = a.get<int>("baud");
+        if (c.baud < 300 || c.baud > 4000000) a.fail(a.key_path("baud"), "must be in [300, 4000000], got " + std::to_string(c.baud));
         const std::string parity = a.get_or<std::string>("parity", "N");
         if (parity != "N" && parity != "E" && parity != "O") a.fail(a.key_path("parity"), "must be N, E or O");
         c.parity = parity[0];

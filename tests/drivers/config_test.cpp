@@ -41,6 +41,8 @@ TEST(DriverConfig, ShippedSetupLoadsAndMistakesNameTheKey) {
   refused("axes:\n  lift: {driver: modbus_tcp, host: h, port: 502, unit_id: 1, counts_per_mm: 1, counts_per_rad: 1, profile_velocity_mm_s: 1}\n",
           "give counts_per_mm (linear) or counts_per_rad (rotary)");
   refused("axes:\n  lift: {driver: profibus}\n", "axes.lift.driver: must be modbus_tcp, modbus_rtu, canopen or sim");
+  refused("axes:\n  sweep: {driver: modbus_rtu, device: /dev/ttyUSB0, baud: 0, unit_id: 3, counts_per_mm: 1, profile_velocity_mm_s: 1}\n",
+          "axes.sweep.baud: must be in [300, 4000000], got 0");
   refused("axes:\n  lift: {driver: sim, speed: 3}\n", "axes.lift.speed: unknown key");
   // A timeout of 0 would be no time at all, not no limit; over ten minutes is a typo.
   const std::string tcp = "axes:\n  lift: {driver: modbus_tcp, host: h, port: 502, unit_id: 1, counts_per_mm: 1, profile_velocity_mm_s: 1, ";
