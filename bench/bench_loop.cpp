@@ -18,6 +18,8 @@
 #include <fstream>
 #include <functional>
 #include <iostream>
+#include <memory>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <string>
@@ -61,7 +63,10 @@ std::vector<std::vector<sp::Viewpoint>> executed_views(dm::Journal& journal, std
   return out;
 }
 
-void write_off(const sp::TriangleMesh& m, const fs::path& path) {
+
+/// The fine mesh as the job reads it, at 9 digits (planner::write_off's µm would move the rough model's
+/// decimation, and with it the plans docs/quality.md records).
+void write_mesh(const sp::TriangleMesh& m, const fs::path& path) {
   std::ofstream f(path);
   f.precision(9);
   f << "OFF\n" << m.vertices.size() << ' ' << m.triangles.size() << " 0\n";
@@ -69,9 +74,7 @@ void write_off(const sp::TriangleMesh& m, const fs::path& path) {
   for (const auto& t : m.triangles) f << "3 " << t[0] << ' ' << t[1] << ' ' << t[2] << "\n";
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+struct Options {
   std::string meshes_dir = std::string(SCANCELL_SOURCE_DIR) + "/../shared/meshes";
   std::string csv_path, keep_dir;
   std::set<std::string> only;
@@ -79,138 +82,180 @@ int main(int argc, char** argv) {
   int threads = 2, oracle_decimation = 4, max_rounds = 4;
   double refine_mm = 3.0;
   sp::CoverageOptions coverage;  // jobs.row_fraction, jobs.normal_tolerance_mm
-  std::string placement;  // auto | as_given; empty: the shipped settings' placement.mode
+  std::string placement;         // auto | as_given; empty: the shipped settings' placement.mode
+};
+
+/// The options, or nothing after printing the usage (an unknown option or a bad --placement).
+std::optional<Options> parse_options(int argc, char** argv) {
+  Options o;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto value = [&] { return scancell::bench::option_value(argc, argv, i); };
-    if (a == "--meshes") meshes_dir = value();
-    else if (a == "--csv") csv_path = value();
-    else if (a == "--keep") keep_dir = value();
-    else if (a == "--rough-vertices") rough_vertices = std::stoull(value());
-    else if (a == "--threads") threads = std::stoi(value());
-    else if (a == "--refine-mm") refine_mm = std::stod(value());
-    else if (a == "--max-rounds") max_rounds = std::stoi(value());
-    else if (a == "--oracle-decimation") oracle_decimation = std::max(1, std::stoi(value()));
-    else if (a == "--placement") placement = value();
-    else if (a == "--normal-tolerance-mm") coverage.normal_tolerance_mm = std::stod(value());
-    else if (a == "--row-fraction") coverage.row_fraction = std::stod(value());
+    if (a == "--meshes") o.meshes_dir = value();
+    else if (a == "--csv") o.csv_path = value();
+    else if (a == "--keep") o.keep_dir = value();
+    else if (a == "--rough-vertices") o.rough_vertices = std::stoull(value());
+    else if (a == "--threads") o.threads = std::stoi(value());
+    else if (a == "--refine-mm") o.refine_mm = std::stod(value());
+    else if (a == "--max-rounds") o.max_rounds = std::stoi(value());
+    else if (a == "--oracle-decimation") o.oracle_decimation = std::max(1, std::stoi(value()));
+    else if (a == "--placement") o.placement = value();
+    else if (a == "--normal-tolerance-mm") o.coverage.normal_tolerance_mm = std::stod(value());
+    else if (a == "--row-fraction") o.coverage.row_fraction = std::stod(value());
     else if (a == "--only") {
       std::stringstream ss(value());
-      for (std::string t; std::getline(ss, t, ',');) only.insert(t);
+      for (std::string t; std::getline(ss, t, ',');) o.only.insert(t);
     } else {
       std::cerr << "usage: bench_loop [--meshes DIR] [--only a,b] [--rough-vertices N] [--refine-mm E] [--max-rounds N] "
-                   "[--placement auto|as_given] [--row-fraction F] [--normal-tolerance-mm T] [--oracle-decimation K] [--threads N] [--csv FILE] [--keep DIR]\n";
-      return 2;
+                   "[--placement auto|as_given] [--row-fraction F] [--normal-tolerance-mm T] [--oracle-decimation K] "
+                   "[--threads N] [--csv FILE] [--keep DIR]\n";
+      return std::nullopt;
     }
   }
-  const std::string root = SCANCELL_SOURCE_DIR;
+  if (!o.placement.empty() && o.placement != "auto" && o.placement != "as_given") {
+    std::cerr << "--placement: auto or as_given, not " << o.placement << "\n";
+    return std::nullopt;
+  }
+  return o;
+}
+
+/// The demo cell as the bench runs it: the models (drives 10x the real cell's speeds), the simulated
+/// drives brought up, and a journal in `work`.
+struct Rig {
   dm::CellModels models;
-  const sp::CellModel real_cell = sp::load_cell(root + "/config/cells/turntable-lift-tilt.yaml");
-  models.cell = real_cell;
-  for (auto& a : models.cell.axes) {
+  sp::CellModel real_cell;
+  std::unique_ptr<dm::CellIo> io;
+  std::unique_ptr<dm::Journal> journal;
+  fs::path work;
+};
+
+Rig make_rig(const Options& o) {
+  const std::string root = SCANCELL_SOURCE_DIR;
+  Rig r;
+  r.real_cell = sp::load_cell(root + "/config/cells/turntable-lift-tilt.yaml");
+  r.models.cell = r.real_cell;
+  for (auto& a : r.models.cell.axes) {
     a.max_speed *= 10.0;
     a.max_accel *= 20.0;
   }
-  models.sensor = sp::load_sensor(root + "/config/sensors/line-scan-thesis.yaml");
-  models.spec = sp::load_spec(root + "/config/spec/thesis.yaml");
-  models.settings = sp::load_planner_settings(root + "/config/planner/default.yaml");
-  if (placement == "auto" || placement == "as_given") models.settings.placement.automatic = placement == "auto";
-  else if (!placement.empty()) {
-    std::cerr << "--placement: auto or as_given, not " << placement << "\n";
-    return 2;
-  }
-
-  std::vector<scancell::bench::BenchObject> objects = scancell::bench::shared_mesh_objects(meshes_dir, refine_mm);
-  for (auto& o : scancell::bench::cad_objects(3.0)) objects.push_back(std::move(o));
-
-  const fs::path work = keep_dir.empty() ? fs::temp_directory_path() / ("bench_loop_" + std::to_string(::getpid())) : fs::path(keep_dir);
-  fs::create_directories(work);
+  r.models.sensor = sp::load_sensor(root + "/config/sensors/line-scan-thesis.yaml");
+  r.models.spec = sp::load_spec(root + "/config/spec/thesis.yaml");
+  r.models.settings = sp::load_planner_settings(root + "/config/planner/default.yaml");
+  if (!o.placement.empty()) r.models.settings.placement.automatic = o.placement == "auto";
+  r.work = o.keep_dir.empty() ? fs::temp_directory_path() / ("bench_loop_" + std::to_string(::getpid())) : fs::path(o.keep_dir);
+  fs::create_directories(r.work);
   dr::DriverSetup setup;
-  for (const auto& a : models.cell.axes) setup.axes[a.name] = dr::SimAxisConfig{};
-  auto io = dm::open_cell_io(models.cell, setup, "bench drivers");
-  dm::bring_up(*io, models.cell, std::chrono::milliseconds(10000));
-  dm::Journal journal(work / "data");
+  for (const auto& a : r.models.cell.axes) setup.axes[a.name] = dr::SimAxisConfig{};
+  r.io = dm::open_cell_io(r.models.cell, setup, "bench drivers");
+  dm::bring_up(*r.io, r.models.cell, std::chrono::milliseconds(10000));
+  r.journal = std::make_unique<dm::Journal>(r.work / "data");
+  return r;
+}
+
+/// The job, as scancellctl submit --mesh FILE --rough-vertices N runs it on the demo cell, to its end.
+std::int64_t run_job(Rig& rig, const Options& o, const fs::path& mesh_file) {
+  dm::JobSettings s;
+  s.max_rounds = o.max_rounds;
+  s.coverage = o.coverage;
+  s.scan_speed_mm_s = 400.0;  // the demo's sweep (the real cell's 50 mm/s × the drives' factor)
+  s.planner_threads = o.threads;
+  s.next_setup_min_area_mm2 = 0.0;  // one setup: what this cell measures of the object as it lies
+  s.jobs_dir = rig.work / "data" / "jobs";
+  dm::JobRequest r;
+  r.mesh = mesh_file.string();
+  r.rough_vertices = o.rough_vertices;
+  dm::validate_request(r);
+  const std::int64_t job = rig.journal->create_job(r.mesh, r.to_json().dump());
+  auto heads = [&](const sp::TriangleMesh& scene, std::size_t object_triangles, const sp::CellModel& placed) {
+    return dm::make_sim_head(rig.models.sensor, scene, object_triangles, 7, &placed, nullptr);
+  };
+  dm::JobRunner runner(*rig.journal, rig.models, rig.io->positioner, heads, s, [](const dm::Progress&) {});
+  std::atomic<int> stop{0};
+  runner.run(job, stop);
+  return job;
+}
+
+/// A finished job's executed views judged against the cell oracle in the placement the job planned in.
+struct Judged {
+  CellOracle oracle;
+  std::vector<std::vector<sp::Viewpoint>> rounds;
+  std::size_t fine_rows = 0, views = 0;
+  double single = 0.0, loop = 0.0;  // m_v of the reach after round 0, at the end
+  double job_cell_time_s = 0.0;
+};
+
+Judged judge(Rig& rig, const Options& o, std::int64_t job, const sp::TriangleMesh& fine_mesh, const std::string& name) {
+  Judged j;
+  j.rounds = executed_views(*rig.journal, job);
+  // The placement the job planned in (the planner is deterministic): the placed cell, for the plate and the
+  // oracle's reach; at the real cell's speeds for cell times.
+  const dm::CellModels& m = rig.models;
+  sp::RoughModelOptions ro;
+  ro.target_vertices = o.rough_vertices;
+  sp::ViewPlan plan = m.settings.placement.automatic ? sp::plan_with_placement(fine_mesh, m.sensor, m.spec, m.settings, ro, o.threads, m.cell)
+                                                     : sp::plan_views(fine_mesh, m.sensor, m.spec, m.settings, ro, o.threads, &m.cell);
+  sp::CellModel placed = *plan.cell;
+  for (std::size_t k = 0; k < placed.axes.size(); ++k) {
+    placed.axes[k].max_speed = rig.real_cell.axes[k].max_speed;
+    placed.axes[k].max_accel = rig.real_cell.axes[k].max_accel;
+  }
+  if (j.rounds.empty() || j.rounds.front().size() != plan.views.size())
+    std::fprintf(stderr, "%s: round 0 executed %zu views, the bench's plan has %zu (placement or plan differ)\n", name.c_str(),
+                 j.rounds.empty() ? std::size_t{0} : j.rounds.front().size(), plan.views.size());
+  const sp::RoughModel fine = sp::make_rough_model(fine_mesh);
+  sp::TriangleMesh scene_mesh = fine.mesh();
+  sp::append_mesh(scene_mesh, sp::fixture_mesh(placed));
+  const sp::OcclusionScene scene(scene_mesh);
+  j.oracle = scancell::bench::cell_oracle(fine_mesh, fine, scene, m.sensor, m.spec, &placed, o.oracle_decimation);
+  std::vector<sp::Viewpoint> all;
+  for (const auto& rv : j.rounds) all.insert(all.end(), rv.begin(), rv.end());
+  j.single = j.rounds.empty() ? 0.0 : scancell::bench::mv_of_reach(fine, scene, m.sensor, m.spec, j.rounds.front(), j.oracle);
+  j.loop = scancell::bench::mv_of_reach(fine, scene, m.sensor, m.spec, all, j.oracle);
+  j.job_cell_time_s = scancell::bench::cell_time_s(placed, all);
+  j.fine_rows = fine.size();
+  j.views = all.size();
+  return j;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const std::optional<Options> opt = parse_options(argc, argv);
+  if (!opt) return 2;
+  const Options& o = *opt;
+  Rig rig = make_rig(o);
+  std::vector<scancell::bench::BenchObject> objects = scancell::bench::shared_mesh_objects(o.meshes_dir, o.refine_mm);
+  for (auto& obj : scancell::bench::cad_objects(3.0)) objects.push_back(std::move(obj));
 
   std::ofstream csv;
-  if (!csv_path.empty()) {
-    csv.open(csv_path);
+  if (!o.csv_path.empty()) {
+    csv.open(o.csv_path);
     csv << "object,fine_vertices,reachable,oracle_views_95,oracle_views_99,oracle_views_99.9,end,rounds,round_views,"
            "single_shot_m_v_reachable,loop_m_v_reachable,loop_views,loop_over_oracle_99,verified_mv,verified_mv_reachable,"
            "round_gains_predicted_realized_mm2,rounds_under_20_percent,needs_attention_area_mm2,job_cell_time_s,oracle_cell_time_s,wall_s\n";
   }
   std::printf("closed loop on turntable-lift-tilt, placement %s, %zu rough rows, max_rounds %d, oracle 1 per %d fine vertices, %d threads\n",
-              models.settings.placement.automatic ? "auto" : "as_given", rough_vertices, max_rounds, oracle_decimation, threads);
+              rig.models.settings.placement.automatic ? "auto" : "as_given", o.rough_vertices, o.max_rounds, o.oracle_decimation, o.threads);
   std::printf("%-16s %6s %6s %15s %-8s %-18s %8s %8s %6s %6s %8s %8s %9s %9s %7s\n", "object", "fine", "reach",
               "oracle 95/99/999", "end", "views per round", "m_v_r_1", "m_v_r", "views", "ratio", "ver_m_v", "ver_r",
               "job_t_s", "orac_t_s", "wall_s");
-  tbb::task_arena arena(threads);
+  tbb::task_arena arena(o.threads);
   for (const auto& obj : objects) {
-    if (!only.empty() && !only.count(obj.name)) continue;
+    if (!o.only.empty() && !o.only.count(obj.name)) continue;
     const auto t0 = std::chrono::steady_clock::now();
-    const fs::path mesh_file = work / (obj.name + ".off");
-    write_off(obj.make(), mesh_file);
+    const fs::path mesh_file = rig.work / (obj.name + ".off");
+    write_mesh(obj.make(), mesh_file);
     const sp::TriangleMesh fine_mesh = sp::load_mesh(mesh_file);  // what the job reads
-
-    // The job, as scancellctl submit --mesh FILE --rough-vertices N on the demo cell.
-    dm::JobSettings s;
-    s.max_rounds = max_rounds;
-    s.coverage = coverage;
-    s.scan_speed_mm_s = 400.0;  // the demo's sweep (the real cell's 50 mm/s × the drives' factor)
-    s.planner_threads = threads;
-    s.next_setup_min_area_mm2 = 0.0;  // one setup: what this cell measures of the object as it lies
-    s.jobs_dir = work / "data" / "jobs";
-    dm::JobRequest r;
-    r.mesh = mesh_file.string();
-    r.rough_vertices = rough_vertices;
-    dm::validate_request(r);
-    const std::int64_t job = journal.create_job(r.mesh, r.to_json().dump());
-    const sp::SensorModel sensor = models.sensor;
-    auto heads = [&](const sp::TriangleMesh& scene, std::size_t object_triangles, const sp::CellModel& placed) {
-      return dm::make_sim_head(sensor, scene, object_triangles, 7, &placed, nullptr);
-    };
-    dm::JobRunner runner(journal, models, io->positioner, heads, s, [](const dm::Progress&) {});
-    std::atomic<int> stop{0};
-    const dm::JobState end = runner.run(job, stop);
-    const auto rec = journal.job(job);
+    const std::int64_t job = run_job(rig, o, mesh_file);
+    const dm::JobRecord rec = rig.journal->job(job);
     const nlohmann::json result = rec.result_json.empty() ? nlohmann::json::object() : nlohmann::json::parse(rec.result_json);
-
-    // The same placement the job planned in (the planner is deterministic): the placed cell, for the plate and
-    // the oracle's reach; at the real cell's speeds for cell times.
-    const auto rounds = executed_views(journal, job);
-    sp::RoughModelOptions ro;
-    ro.target_vertices = rough_vertices;
-    sp::ViewPlan plan;
-    arena.execute([&] {
-      plan = models.settings.placement.automatic
-                 ? sp::plan_with_placement(fine_mesh, models.sensor, models.spec, models.settings, ro, threads, models.cell)
-                 : sp::plan_views(fine_mesh, models.sensor, models.spec, models.settings, ro, threads, &models.cell);
-    });
-    sp::CellModel placed = *plan.cell;
-    for (std::size_t k = 0; k < placed.axes.size(); ++k) {
-      placed.axes[k].max_speed = real_cell.axes[k].max_speed;
-      placed.axes[k].max_accel = real_cell.axes[k].max_accel;
-    }
-    if (rounds.empty() || rounds.front().size() != plan.views.size())
-      std::fprintf(stderr, "%s: round 0 executed %zu views, the bench's plan has %zu (placement or plan differ)\n",
-                   obj.name.c_str(), rounds.empty() ? std::size_t{0} : rounds.front().size(), plan.views.size());
-    const sp::RoughModel fine = sp::make_rough_model(fine_mesh);
-    sp::TriangleMesh scene_mesh = fine.mesh();
-    sp::append_mesh(scene_mesh, sp::fixture_mesh(placed));
-    const sp::OcclusionScene scene(scene_mesh);
-    CellOracle oracle;
-    std::vector<sp::Viewpoint> all;
-    double single = 0.0, loop = 0.0;
-    arena.execute([&] {
-      oracle = scancell::bench::cell_oracle(fine_mesh, fine, scene, models.sensor, models.spec, &placed, oracle_decimation);
-      for (const auto& rv : rounds) all.insert(all.end(), rv.begin(), rv.end());
-      single = rounds.empty() ? 0.0 : scancell::bench::mv_of_reach(fine, scene, models.sensor, models.spec, rounds.front(), oracle);
-      loop = scancell::bench::mv_of_reach(fine, scene, models.sensor, models.spec, all, oracle);
-    });
-    const double job_t = scancell::bench::cell_time_s(placed, all);
+    Judged j;
+    arena.execute([&] { j = judge(rig, o, job, fine_mesh, obj.name); });
+    const CellOracle& oracle = j.oracle;
     std::string per_round;
-    for (const auto& rv : rounds) per_round += (per_round.empty() ? "" : "+") + std::to_string(rv.size());
+    for (const auto& rv : j.rounds) per_round += (per_round.empty() ? "" : "+") + std::to_string(rv.size());
     const double verified = result.value("verified_mv", std::nan(""));
-    const double ratio = oracle.views_99 ? double(all.size()) / double(oracle.views_99) : std::nan("");
+    const double ratio = oracle.views_99 ? double(j.views) / double(oracle.views_99) : std::nan("");
     const std::string weak = result.contains("rounds_under_20_percent") ? result["rounds_under_20_percent"].dump() : "[]";
     const double attention = result.value("needs_attention_area_mm2", 0.0);
     const double wall = scancell::seconds_since(t0);
@@ -222,17 +267,18 @@ int main(int argc, char** argv) {
                std::to_string(std::lround(g.value("realized_gain_mm2", 0.0)));
     std::printf("%-16s %6zu %6.3f %4zu/%4zu/%4zu %-8s %-18s %8.4f %8.4f %6zu %6.2f %8.4f %8.4f %9.0f %9.0f %7.0f  gains %s, weak rounds %s, "
                 "needs attention %.0f mm2: %s\n",
-                obj.name.c_str(), fine.size(), oracle.reachable(), oracle.views_95, oracle.views_99, oracle.views_999,
-                dm::to_string(end), per_round.c_str(), single, loop, all.size(), ratio, verified,
-                verified / oracle.reachable(), job_t, oracle.cell_time_s, wall, gains.c_str(), weak.c_str(), attention, rec.cause.c_str());
+                obj.name.c_str(), j.fine_rows, oracle.reachable(), oracle.views_95, oracle.views_99, oracle.views_999,
+                dm::to_string(rec.state), per_round.c_str(), j.single, j.loop, j.views, ratio, verified,
+                verified / oracle.reachable(), j.job_cell_time_s, oracle.cell_time_s, wall, gains.c_str(), weak.c_str(), attention,
+                rec.cause.c_str());
     std::fflush(stdout);
     if (csv)
-      csv << obj.name << ',' << fine.size() << ',' << oracle.reachable() << ',' << oracle.views_95 << ',' << oracle.views_99
-          << ',' << oracle.views_999 << ',' << dm::to_string(end) << ',' << rounds.size() << ',' << per_round << ','
-          << single << ',' << loop << ',' << all.size() << ',' << ratio << ',' << verified << ','
-          << verified / oracle.reachable() << ',' << gains << ',' << '"' << weak << '"' << ',' << attention << ',' << job_t << ','
-          << oracle.cell_time_s << ',' << wall << '\n';
+      csv << obj.name << ',' << j.fine_rows << ',' << oracle.reachable() << ',' << oracle.views_95 << ',' << oracle.views_99
+          << ',' << oracle.views_999 << ',' << dm::to_string(rec.state) << ',' << j.rounds.size() << ',' << per_round << ','
+          << j.single << ',' << j.loop << ',' << j.views << ',' << ratio << ',' << verified << ','
+          << verified / oracle.reachable() << ',' << gains << ',' << '"' << weak << '"' << ',' << attention << ','
+          << j.job_cell_time_s << ',' << oracle.cell_time_s << ',' << wall << '\n';
   }
-  if (keep_dir.empty()) fs::remove_all(work);
+  if (o.keep_dir.empty()) fs::remove_all(rig.work);
   return 0;
 }
