@@ -39,6 +39,38 @@ Eigen::Vector3d aim(const Eigen::Vector3d& b, double elev, double yaw) {
   return Eigen::Vector3d(hr.x() * std::cos(elev), hr.y() * std::cos(elev), std::sin(elev));
 }
 
+/// A view found clear: its viewpoint (stand-off set) and the stand-off step it took (0: as seeded).
+struct Placed {
+  Viewpoint view;
+  int step = 0;
+};
+
+/// The first of `steps` stand-offs, from `seed_standoff` out to `range_cap`, at which the view aimed at
+/// `target` with rotation `rotation(standoff)` and scan length `scan_length(standoff, step)` is reachable
+/// with the scanner body clear; `reachable` is set when the axes reached any of them.
+template <class Rotation, class ScanLength>
+std::optional<Placed> first_clear_standoff(const CellModel& cell, const CollisionChecker& checker, const Eigen::Vector3d& target,
+                                           double seed_standoff, double range_cap, int steps, Rotation rotation,
+                                           ScanLength scan_length, bool& reachable) {
+  for (int step = 0; step < std::max(1, steps); ++step) {
+    const double standoff = steps <= 1 ? seed_standoff : seed_standoff + (range_cap - seed_standoff) * step / (steps - 1);
+    if (step > 0 && standoff <= seed_standoff) break;
+    const Eigen::Matrix3d r = rotation(standoff);
+    const Eigen::Vector3d b = -r.col(2);
+    const double scan = scan_length(standoff, step);
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    pose.linear() = r;
+    pose.translation() = target - standoff * b;
+    if (!inverse_kinematics(cell, pose, scan).ok) continue;
+    reachable = true;
+    if (checker.collides(pose, scan)) continue;
+    Placed out{viewpoint_from_pose(r, pose.translation(), scan), step};
+    out.view.standoff_mm = standoff;
+    return out;
+  }
+  return std::nullopt;
+}
+
 }  // namespace
 
 bool has_cell_native_viewpoints(const CellModel& cell) {
@@ -74,30 +106,20 @@ std::vector<Viewpoint> arm_viewpoints(const std::vector<Viewpoint>& seeds, const
         rotations.push_back(Eigen::AngleAxisd(st.cell_oblique_rad, about).toRotationMatrix() * seed.rotation());
       }
       Out& o = per[k];
-      for (const Eigen::Matrix3d& r : rotations) {
-        const Eigen::Vector3d b = -r.col(2);
-        for (int step = 0; step < std::max(1, st.cell_standoff_steps) && !o.view; ++step) {
-          const double standoff =
-              st.cell_standoff_steps <= 1 ? seed.standoff_mm
-                                          : seed.standoff_mm + (range_cap - seed.standoff_mm) * step / (st.cell_standoff_steps - 1);
-          if (step > 0 && standoff <= seed.standoff_mm) break;
-          const double scan = step == 0 ? seed.scan_length_mm
-                                        : design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad);
-          Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-          pose.linear() = r;
-          pose.translation() = target - standoff * b;
-          if (!inverse_kinematics(cell, pose, scan).ok) continue;
-          o.reachable = true;
-          if (checker.collides(pose, scan)) continue;
-          Viewpoint v = viewpoint_from_pose(r, pose.translation(), scan);
-          v.standoff_mm = standoff;
-          v.target_row = seed.target_row;
-          v.twist_level = seed.twist_level;
-          v.tilt_rad = seed.tilt_rad;
-          o.view = v;
-          o.stepped = step > 0 || &r != &rotations.front();
-        }
-        if (o.view) break;
+      for (std::size_t n = 0; n < rotations.size() && !o.view; ++n) {
+        const auto placed = first_clear_standoff(
+            cell, checker, target, seed.standoff_mm, range_cap, st.cell_standoff_steps, [&](double) { return rotations[n]; },
+            [&](double standoff, int step) {
+              return step == 0 ? seed.scan_length_mm : design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad);
+            },
+            o.reachable);
+        if (!placed) continue;
+        Viewpoint v = placed->view;
+        v.target_row = seed.target_row;
+        v.twist_level = seed.twist_level;
+        v.tilt_rad = seed.tilt_rad;
+        o.view = v;
+        o.stepped = placed->step > 0 || n > 0;
       }
     }
   });
@@ -172,31 +194,22 @@ std::vector<Viewpoint> cell_viewpoints(const RoughModel& rough, const std::vecto
       int variant = 0;
       for (const auto& [elev_raw, yaw_sign] : variants) {
         const double elev = std::clamp(elev_raw, -elev_max, elev_max);
-        bool kept = false, reachable = false;
-        for (int step = 0; step < std::max(1, st.cell_standoff_steps) && !kept; ++step) {
-          const double standoff =
-              st.cell_standoff_steps <= 1 ? seed.standoff_mm
-                                     : seed.standoff_mm + (range_cap - seed.standoff_mm) * step / (st.cell_standoff_steps - 1);
-          if (step > 0 && standoff <= seed.standoff_mm) break;
-          // The bisector's yaw is half the triangulation angle at this stand-off.
-          const double yaw = yaw_sign * 0.5 * std::atan2(sensor.baseline_mm, standoff);
-          const Eigen::Matrix3d r = cell_frame(aim(b0, elev, yaw), table_to_object);
-          const Eigen::Vector3d b = -r.col(2);
-          const double scan = design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad);
-          Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-          pose.linear() = r;
-          pose.translation() = target - standoff * b;
-          if (!inverse_kinematics(cell, pose, scan).ok) continue;
-          reachable = true;
-          if (checker.collides(pose, scan)) continue;
-          Viewpoint v = viewpoint_from_pose(r, pose.translation(), scan);
-          v.standoff_mm = standoff;
+        bool reachable = false;
+        // The bisector's yaw is half the triangulation angle at the stand-off tried.
+        auto yaw_at = [&](double standoff) { return yaw_sign * 0.5 * std::atan2(sensor.baseline_mm, standoff); };
+        const auto placed = first_clear_standoff(
+            cell, checker, target, seed.standoff_mm, range_cap, st.cell_standoff_steps,
+            [&](double standoff) { return cell_frame(aim(b0, elev, yaw_at(standoff)), table_to_object); },
+            [&](double standoff, int) { return design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad); },
+            reachable);
+        const bool kept = placed.has_value();
+        if (kept) {
+          Viewpoint v = placed->view;
           v.target_row = seed.target_row;
           v.twist_level = variant;
-          v.tilt_rad = yaw;
+          v.tilt_rad = yaw_at(v.standoff_mm);
           o.views.push_back(v);
-          o.stepped_back += step > 0;
-          kept = true;
+          o.stepped_back += placed->step > 0;
         }
         if (!kept) ++(reachable ? o.colliding : o.unreachable);
         ++variant;
