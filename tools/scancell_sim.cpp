@@ -17,6 +17,8 @@
 #include <cstring>
 #include <iostream>
 #include <map>
+#include <optional>
+#include <variant>
 #include <memory>
 #include <string>
 #include <thread>
@@ -67,7 +69,6 @@ int usage() {
   std::cerr << "\n";
   return 2;
 }
-}  // namespace
 
 int serve_can(int argc, char** argv) {
   std::string path;
@@ -122,81 +123,74 @@ int serve_can(int argc, char** argv) {
   return violations == 0 ? 0 : 1;
 }
 
-int main(int argc, char** argv) {
-  if (argc >= 2 && std::strcmp(argv[1], "can") == 0) return serve_can(argc, argv);
-  if (argc < 2 || std::strcmp(argv[1], "modbus") != 0) return usage();
+/// `scancell-sim modbus`'s options.
+struct ModbusOptions {
   int port = 0, drives = 1;
   bool rtu = false, use_stdin = true;
   sim::DriveParams params;
   sim::ModbusFault fault = sim::ModbusFault::none;
-  auto number = [&](int& i, const char* what) -> double {
+};
+
+/// The options, or the exit code after saying what is wrong.
+std::variant<ModbusOptions, int> parse_modbus(int argc, char** argv) {
+  ModbusOptions o;
+  auto number = [&](int& i, const char* what) -> std::optional<double> {
     char* end = nullptr;
     const double v = std::strtod(argv[++i], &end);
     if (*end || !(v > 0.0)) {
       std::cerr << "scancell-sim: " << what << ": '" << argv[i] << "' is not a positive number\n";
-      std::exit(2);
+      return std::nullopt;
     }
     return v;
   };
   for (int i = 2; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--tcp" && i + 1 < argc) {
+    const bool has_value = i + 1 < argc;
+    if (a == "--tcp" && has_value) {
       char* end = nullptr;
-      port = static_cast<int>(std::strtol(argv[++i], &end, 10));
-      if (*end || port <= 0 || port > 65535) {
+      o.port = static_cast<int>(std::strtol(argv[++i], &end, 10));
+      if (*end || o.port <= 0 || o.port > 65535) {
         std::cerr << "scancell-sim: --tcp: '" << argv[i] << "' is not a port\n";
         return 2;
       }
-    } else if (a == "--drives" && i + 1 < argc) {
-      drives = static_cast<int>(number(i, "--drives"));
-      if (drives < 1 || drives > 32) {
+    } else if (a == "--drives" && has_value) {
+      const auto v = number(i, "--drives");
+      if (!v) return 2;
+      o.drives = static_cast<int>(*v);
+      if (o.drives < 1 || o.drives > 32) {
         std::cerr << "scancell-sim: --drives must be in [1, 32]\n";
         return 2;
       }
-    } else if (a == "--max-velocity" && i + 1 < argc) {
-      params.max_velocity_counts_s = number(i, "--max-velocity");
-    } else if (a == "--accel" && i + 1 < argc) {
-      params.accel_counts_s2 = number(i, "--accel");
+    } else if ((a == "--max-velocity" || a == "--accel") && has_value) {
+      const auto v = number(i, a.c_str());
+      if (!v) return 2;
+      (a == "--accel" ? o.params.accel_counts_s2 : o.params.max_velocity_counts_s) = *v;
     } else if (a == "--no-stdin") {
-      use_stdin = false;
+      o.use_stdin = false;
     } else if (a == "--rtu") {
-      rtu = true;
-    } else if (a == "--fault" && i + 1 < argc) {
+      o.rtu = true;
+    } else if (a == "--fault" && has_value) {
       auto it = kFaults.find(argv[++i]);
       if (it == kFaults.end()) {
         std::cerr << "scancell-sim: --fault: unknown fault '" << argv[i] << "'\n";
         return usage();
       }
-      fault = it->second;
+      o.fault = it->second;
     } else {
       std::cerr << "scancell-sim: unknown option '" << a << "'\n";
       return usage();
     }
   }
-  if (!rtu && port == 0) return usage();
-  if (rtu && drives != 1) {
+  if (!o.rtu && o.port == 0) return usage();
+  if (o.rtu && o.drives != 1) {
     std::cerr << "scancell-sim: --drives is for --tcp\n";
     return 2;
   }
-  std::signal(SIGINT, on_signal);
-  std::signal(SIGTERM, on_signal);
-  std::vector<std::unique_ptr<sim::ModbusDriveSim>> drive;
-  try {
-    for (int k = 0; k < drives; ++k) {
-      drive.push_back(std::make_unique<sim::ModbusDriveSim>(params));
-      drive.back()->inject(fault);
-      if (rtu) {
-        std::cout << "scancell-sim: Modbus RTU on " << drive.back()->serve_rtu() << std::endl;
-      } else {
-        const int got = drive.back()->serve_tcp(port + k);
-        if (got != port + k) throw std::runtime_error("port " + std::to_string(port + k) + " is taken");
-        std::cout << "scancell-sim: Modbus TCP drive " << k << " on 127.0.0.1:" << got << std::endl;
-      }
-    }
-  } catch (const std::exception& e) {
-    std::cerr << "scancell-sim: " << e.what() << "\n";
-    return 1;
-  }
+  return o;
+}
+
+/// Until a signal (or the end of standard input): "[drive] fault" lines switch a drive's fault.
+void fault_console(const std::vector<std::unique_ptr<sim::ModbusDriveSim>>& drive, bool use_stdin) {
   std::string line;
   while (!g_stop) {
     if (!use_stdin) {
@@ -220,6 +214,32 @@ int main(int argc, char** argv) {
     drive[k]->inject(it->second);
     std::cout << "scancell-sim: drive " << k << " fault " << name << std::endl;
   }
+}
+
+int serve_modbus(int argc, char** argv) {
+  const auto parsed = parse_modbus(argc, argv);
+  if (const int* code = std::get_if<int>(&parsed)) return *code;
+  const ModbusOptions& o = std::get<ModbusOptions>(parsed);
+  std::signal(SIGINT, on_signal);
+  std::signal(SIGTERM, on_signal);
+  std::vector<std::unique_ptr<sim::ModbusDriveSim>> drive;
+  try {
+    for (int k = 0; k < o.drives; ++k) {
+      drive.push_back(std::make_unique<sim::ModbusDriveSim>(o.params));
+      drive.back()->inject(o.fault);
+      if (o.rtu) {
+        std::cout << "scancell-sim: Modbus RTU on " << drive.back()->serve_rtu() << std::endl;
+      } else {
+        const int got = drive.back()->serve_tcp(o.port + k);
+        if (got != o.port + k) throw std::runtime_error("port " + std::to_string(o.port + k) + " is taken");
+        std::cout << "scancell-sim: Modbus TCP drive " << k << " on 127.0.0.1:" << got << std::endl;
+      }
+    }
+  } catch (const std::exception& e) {
+    std::cerr << "scancell-sim: " << e.what() << "\n";
+    return 1;
+  }
+  fault_console(drive, o.use_stdin);
   std::size_t commands = 0, violations = 0;
   for (const auto& d : drive) {
     commands += d->commands().size();
@@ -227,4 +247,12 @@ int main(int argc, char** argv) {
   }
   std::cout << "scancell-sim: " << commands << " commands served, " << violations << " limit violations" << std::endl;
   return violations == 0 ? 0 : 1;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc >= 2 && std::strcmp(argv[1], "can") == 0) return serve_can(argc, argv);
+  if (argc >= 2 && std::strcmp(argv[1], "modbus") == 0) return serve_modbus(argc, argv);
+  return usage();
 }

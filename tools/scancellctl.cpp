@@ -16,6 +16,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -300,67 +301,100 @@ int export_job(Connection& c, std::int64_t job, const std::filesystem::path& dir
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  CLI::App app{"scancellctl: control scancelld (submit, status, list, watch, pause, resume, abort, continue, reload, export)"};
-  const char* env = std::getenv("SCANCELL_SOCKET");
-  std::string socket = env ? env : "/run/scancell/control.sock";
-  bool as_json = false;
-  app.add_option("--socket", socket, "control socket of scancelld (default $SCANCELL_SOCKET or /run/scancell/control.sock)");
-  app.add_flag("--json", as_json, "print the daemon's replies as JSON lines");
-  app.require_subcommand(1);
+namespace {
 
-  std::string mesh, spec, settings, truth;
+/// Every option of every subcommand: CLI11 writes into it, request() reads it.
+struct Args {
+  std::string socket, mesh, spec, settings, truth, placement, out_dir, kind;
+  bool as_json = false, then_watch = false, with_scans = false;
   double fit_mm = 0.0;
-  int rough_vertices = 0;
-  bool then_watch = false;
-  auto* submit = app.add_subcommand("submit", "queue a scan job on an object's rough model");
+  int rough_vertices = 0, setups = 0;
   std::vector<double> bbox;
-  auto* mesh_opt = submit->add_option("--mesh", mesh, "rough model of the object (OFF, PLY, OBJ, STL)")->check(CLI::ExistingFile);
-  auto* bbox_opt = submit->add_option("--bbox-mm", bbox, "instead of a mesh: the object's size X Y Z (mm); the job starts with a rough scan")
+  std::int64_t job = 0;
+};
+
+void add_submit(CLI::App& app, Args& a) {
+  auto* submit = app.add_subcommand("submit", "queue a scan job on an object's rough model");
+  auto* mesh_opt = submit->add_option("--mesh", a.mesh, "rough model of the object (OFF, PLY, OBJ, STL)")->check(CLI::ExistingFile);
+  auto* bbox_opt = submit->add_option("--bbox-mm", a.bbox, "instead of a mesh: the object's size X Y Z (mm); the job starts with a rough scan")
                        ->expected(3)->delimiter(',');
   mesh_opt->excludes(bbox_opt);
-  submit->add_option("--fit-mm", fit_mm, "scale so the longest side is this many mm (default: the mesh is in mm)")->check(CLI::PositiveNumber);
-  submit->add_option("--spec", spec, "model specification (YAML; default: the daemon's)")->check(CLI::ExistingFile);
-  submit->add_option("--settings", settings, "planner settings (YAML; default: the daemon's)")->check(CLI::ExistingFile);
-  submit->add_option("--truth", truth, "simulation: the object actually on the table (default: the mesh)")->check(CLI::ExistingFile);
-  submit->add_option("--rough-vertices", rough_vertices, "rough-model size (rows of the measurability matrix)")->check(CLI::Range(50, 200000));
-  std::string placement;
-  submit->add_option("--placement", placement,
+  submit->add_option("--fit-mm", a.fit_mm, "scale so the longest side is this many mm (default: the mesh is in mm)")->check(CLI::PositiveNumber);
+  submit->add_option("--spec", a.spec, "model specification (YAML; default: the daemon's)")->check(CLI::ExistingFile);
+  submit->add_option("--settings", a.settings, "planner settings (YAML; default: the daemon's)")->check(CLI::ExistingFile);
+  submit->add_option("--truth", a.truth, "simulation: the object actually on the table (default: the mesh)")->check(CLI::ExistingFile);
+  submit->add_option("--rough-vertices", a.rough_vertices, "rough-model size (rows of the measurability matrix)")->check(CLI::Range(50, 200000));
+  submit->add_option("--placement", a.placement,
                      "how the object rests on the plate: auto (plan its stable resting poses, keep the best; the result says "
                      "how to place it) or as_given (default: the daemon's settings)")
       ->check(CLI::IsMember({"auto", "as_given"}));
-  int setups = 0;
-  submit->add_option("--setups", setups,
+  submit->add_option("--setups", a.setups,
                      "setups the job may use: after the first, with enough left unmeasured, it waits for the part to be "
                      "turned over as it says (then: scancellctl continue JOB) (default: the daemon's jobs.max_setups)")
       ->check(CLI::Range(1, scancell::daemon::kMaxSetups));
-  submit->add_flag("--watch", then_watch, "then watch the job to its end");
+  submit->add_flag("--watch", a.then_watch, "then watch the job to its end");
+}
 
-  std::int64_t job = 0;
+/// status, list, watch, pause, resume, abort, continue, reload, export and calibrate.
+void add_job_commands(CLI::App& app, Args& a) {
   auto* status = app.add_subcommand("status", "daemon status, or one job's");
-  status->add_option("job", job, "job id");
+  status->add_option("job", a.job, "job id");
   app.add_subcommand("list", "the latest jobs");
   auto* w = app.add_subcommand("watch", "live progress of a job; exits with its outcome");
-  w->add_option("job", job, "job id")->required();
-  CLI::App* ctl[4];
+  w->add_option("job", a.job, "job id")->required();
   const char* names[4] = {"pause", "resume", "abort", "continue"};
   const char* help[4] = {"pause at the next safe point", "continue a paused or faulted job (clears drive faults)", "end a job",
                          "confirm that the part was turned over as the job's next setup asks (a job awaiting the operator)"};
-  for (int k = 0; k < 4; ++k) {
-    ctl[k] = app.add_subcommand(names[k], help[k]);
-    ctl[k]->add_option("job", job, "job id")->required();
-  }
+  for (int k = 0; k < 4; ++k) app.add_subcommand(names[k], help[k])->add_option("job", a.job, "job id")->required();
   app.add_subcommand("reload", "re-read the calibration (sensor and cell models)");
-  std::string out_dir;
-  bool with_scans = false;
   auto* exp = app.add_subcommand("export", "copy a finished job's product (cloud, model, report, pictures), plans and events into a directory");
-  exp->add_option("job", job, "job id")->required();
-  exp->add_option("--out", out_dir, "a new or empty directory")->required();
-  exp->add_flag("--with-scans", with_scans, "also the stored range images (scans/, what scancell fuse reads)");
-  std::string kind;
+  exp->add_option("job", a.job, "job id")->required();
+  exp->add_option("--out", a.out_dir, "a new or empty directory")->required();
+  exp->add_flag("--with-scans", a.with_scans, "also the stored range images (scans/, what scancell fuse reads)");
   auto* calibrate = app.add_subcommand("calibrate", "run a calibration on the cell (its target must be on the table)");
-  calibrate->add_option("kind", kind, "sensor | turntable_axis | positioner")->required()->check(CLI::IsMember({"sensor", "turntable_axis", "positioner"}));
-  calibrate->add_flag("--watch", then_watch, "then watch the run to its end");
+  calibrate->add_option("kind", a.kind, "sensor | turntable_axis | positioner")->required()->check(CLI::IsMember({"sensor", "turntable_axis", "positioner"}));
+  calibrate->add_flag("--watch", a.then_watch, "then watch the run to its end");
+}
+
+/// The control request for `cmd`, or nothing after saying why (a submit needs a mesh or a box).
+std::optional<json> request(const std::string& cmd, const Args& a) {
+  json req = {{"cmd", cmd}};
+  if (cmd == "submit") {
+    if (a.mesh.empty() == a.bbox.empty()) {
+      std::cerr << "scancellctl: submit needs --mesh or --bbox-mm, one of them\n";
+      return std::nullopt;
+    }
+    if (!a.mesh.empty()) req["mesh"] = absolute(a.mesh);
+    if (!a.bbox.empty()) req["bbox_mm"] = a.bbox;
+    if (a.fit_mm > 0.0) req["fit_mm"] = a.fit_mm;
+    if (!a.spec.empty()) req["spec"] = absolute(a.spec);
+    if (!a.settings.empty()) req["settings"] = absolute(a.settings);
+    if (!a.truth.empty()) req["truth"] = absolute(a.truth);
+    if (a.rough_vertices > 0) req["rough_vertices"] = a.rough_vertices;
+    if (!a.placement.empty()) req["placement"] = a.placement;
+    if (a.setups > 0) req["setups"] = a.setups;
+  } else if (cmd == "calibrate") {
+    req["kind"] = a.kind;
+  } else if (cmd == "status") {
+    if (a.job > 0) req["job"] = a.job;
+  } else if (cmd != "list" && cmd != "reload") {
+    req["job"] = a.job;
+  }
+  return req;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"scancellctl: control scancelld (submit, status, list, watch, pause, resume, abort, continue, reload, export)"};
+  Args a;
+  const char* env = std::getenv("SCANCELL_SOCKET");
+  a.socket = env ? env : "/run/scancell/control.sock";
+  app.add_option("--socket", a.socket, "control socket of scancelld (default $SCANCELL_SOCKET or /run/scancell/control.sock)");
+  app.add_flag("--json", a.as_json, "print the daemon's replies as JSON lines");
+  app.require_subcommand(1);
+  add_submit(app, a);
+  add_job_commands(app, a);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -368,41 +402,21 @@ int main(int argc, char** argv) {
   }
 
   try {
-    Connection c(socket);
+    Connection c(a.socket);
     const std::string cmd = app.get_subcommands().front()->get_name();
-    if (cmd == "watch") return watch(c, job, as_json);
-    if (cmd == "export") return export_job(c, job, out_dir, with_scans);
-    json req = {{"cmd", cmd}};
-    if (cmd == "submit") {
-      if (mesh.empty() == bbox.empty()) {
-        std::cerr << "scancellctl: submit needs --mesh or --bbox-mm, one of them\n";
-        return 2;
-      }
-      if (!mesh.empty()) req["mesh"] = absolute(mesh);
-      if (!bbox.empty()) req["bbox_mm"] = bbox;
-      if (fit_mm > 0.0) req["fit_mm"] = fit_mm;
-      if (!spec.empty()) req["spec"] = absolute(spec);
-      if (!settings.empty()) req["settings"] = absolute(settings);
-      if (!truth.empty()) req["truth"] = absolute(truth);
-      if (rough_vertices > 0) req["rough_vertices"] = rough_vertices;
-      if (!placement.empty()) req["placement"] = placement;
-      if (setups > 0) req["setups"] = setups;
-    } else if (cmd == "calibrate") {
-      req["kind"] = kind;
-    } else if (cmd == "status") {
-      if (job > 0) req["job"] = job;
-    } else if (cmd != "list" && cmd != "reload") {
-      req["job"] = job;
-    }
-    c.send(req);
+    if (cmd == "watch") return watch(c, a.job, a.as_json);
+    if (cmd == "export") return export_job(c, a.job, a.out_dir, a.with_scans);
+    const std::optional<json> req = request(cmd, a);
+    if (!req) return 2;
+    c.send(*req);
     const json reply = c.receive();
     if (!reply.value("ok", false)) {
       std::cerr << "scancellctl: " << reply.value("error", "refused") << "\n";
       return 1;
     }
-    if (as_json || (cmd != "submit" && cmd != "calibrate")) std::cout << reply.dump(as_json ? -1 : 2) << std::endl;
+    if (a.as_json || (cmd != "submit" && cmd != "calibrate")) std::cout << reply.dump(a.as_json ? -1 : 2) << std::endl;
     else std::cout << "job " << reply["job"] << " queued" << std::endl;
-    if ((cmd == "submit" || cmd == "calibrate") && then_watch) return watch(c, reply["job"].get<std::int64_t>(), as_json);
+    if ((cmd == "submit" || cmd == "calibrate") && a.then_watch) return watch(c, reply["job"].get<std::int64_t>(), a.as_json);
     return 0;
   } catch (const std::runtime_error& e) {
     std::cerr << "scancellctl: " << e.what() << "\n";

@@ -3,6 +3,10 @@
 // file's keys are checked with their key paths.
 #include <filesystem>
 #include <fstream>
+#include <iomanip>
+#include <map>
+#include <regex>
+#include <sstream>
 #include <variant>
 
 #include <gmock/gmock.h>
@@ -51,6 +55,73 @@ TEST(DriverConfig, ShippedSetupLoadsAndMistakesNameTheKey) {
   std::ofstream(dir / "d.yaml") << tcp + "response_timeout_ms: 0.4}\n";
   EXPECT_EQ(std::get<dr::ModbusConfig>(dr::load_driver_setup(dir / "d.yaml").axes.at("lift")).response_timeout.count(), 1);
   std::filesystem::remove_all(dir);
+}
+
+/// docs/drivers.md's key table: every row with one key and a numeric range ("default, [lo, hi]",
+/// "required, (lo, hi]") is the range the loader applies (issue 17: a range documented once and checked
+/// here): each bound accepted or refused as its bracket says, a step beyond it refused with the key path, and
+/// the documented default accepted.
+TEST(DriverConfig, TheDocumentedRangesAreTheLoadersRanges) {
+  std::ifstream in(std::string(SCANCELL_SOURCE_DIR) + "/docs/drivers.md");
+  std::string line;
+  bool table = false;
+  const std::regex row(R"(^\| `axes\.<axis>\.([a-z_]+)` \| ([a-z_, ]+) \| ([0-9.]+|required), ([\[(])([-0-9.e]+), ([-0-9.e]+)([\])]) \|)");
+  // The smallest setup each bus accepts, on axis `lift`; the key under test is appended.
+  const std::map<std::string, std::string> base{
+      {"modbus_tcp", "driver: modbus_tcp, host: h, port: 502, unit_id: 1, counts_per_mm: 1, profile_velocity_mm_s: 1"},
+      {"modbus_rtu", "driver: modbus_rtu, device: /dev/ttyUSB0, baud: 9600, unit_id: 1, counts_per_mm: 1, profile_velocity_mm_s: 1"},
+      {"canopen", "driver: canopen, interface: can0, node_id: 5, counts_per_mm: 1, profile_velocity_mm_s: 1"}};
+  const auto dir = std::filesystem::temp_directory_path() / "scancell_driver_ranges";
+  std::filesystem::create_directories(dir);
+  auto load = [&](const std::string& driver, const std::string& key, const std::string& value) -> std::string {
+    std::string fields = base.at(driver);
+    // A key the base already sets is replaced, not given twice.
+    const std::regex own("(^|, )" + key + ": [^,]*");
+    fields = std::regex_replace(fields, own, "");
+    if (fields.rfind(", ", 0) == 0) fields = fields.substr(2);
+    std::ofstream(dir / "d.yaml") << "axes:\n  lift: {" << fields << ", " << key << ": " << value << "}\n";
+    try {
+      dr::load_driver_setup(dir / "d.yaml");
+      return "";
+    } catch (const std::exception& e) {
+      return e.what();
+    }
+  };
+  std::size_t rows = 0;
+  while (std::getline(in, line)) {
+    if (line.rfind("## Configuration (`config/drivers/", 0) == 0) table = true;
+    else if (table && line.rfind("## ", 0) == 0) break;
+    std::smatch m;
+    if (!table || !std::regex_search(line, m, row)) continue;
+    const std::string key = m[1], def = m[3], lo = m[5], hi = m[6];
+    const bool lo_in = m[4] == "[", hi_in = m[7] == "]";
+    std::stringstream drivers(m[2].str());
+    for (std::string d; std::getline(drivers, d, ',');) {
+      d.erase(0, d.find_first_not_of(' '));
+      if (!base.count(d)) continue;
+      ++rows;
+      const std::string where = d + " " + key;
+      const std::string path = "axes.lift." + key;
+      if (def != "required") {
+        EXPECT_EQ(load(d, key, def), "") << where << ": the documented default " << def;
+      }
+      const std::string at_lo = load(d, key, lo), at_hi = load(d, key, hi);
+      EXPECT_EQ(at_lo.empty(), lo_in) << where << " = " << lo << ": " << at_lo;
+      EXPECT_EQ(at_hi.empty(), hi_in) << where << " = " << hi << ": " << at_hi;
+      // One step beyond each bound (a unit, or a thousandth of a bound under 1).
+      const double l = std::stod(lo), h = std::stod(hi);
+      const double step_l = std::abs(l) >= 1.0 ? 1.0 : 1e-3, step_h = std::abs(h) >= 1.0 ? 1.0 : 1e-3;
+      std::ostringstream below, above;
+      below << std::setprecision(12) << l - step_l;
+      above << std::setprecision(12) << h + step_h;
+      EXPECT_THAT(load(d, key, below.str()), HasSubstr(path)) << where << " = " << below.str();
+      EXPECT_THAT(load(d, key, above.str()), HasSubstr(path)) << where << " = " << above.str();
+    }
+  }
+  std::filesystem::remove_all(dir);
+  // response_timeout_ms, retries, reconnect_backoff_ms, reconnect_attempts (two buses each), unit_id (two),
+  // sdo_timeout_ms, heartbeat_timeout_ms.
+  EXPECT_GE(rows, 10u);
 }
 
 // The real drivers' own code paths, reached without a simulator (and linking their objects without the planner).
