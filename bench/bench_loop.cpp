@@ -6,7 +6,8 @@
 // (bench/cell_oracle.hpp) reaches, and the job's total views against the oracle's views to 99 %.
 //
 //   bench_loop [--meshes DIR] [--only a,b] [--rough-vertices N] [--refine-mm E] [--max-rounds N]
-//              [--placement auto|as_given] [--row-fraction F] [--normal-tolerance-mm T] [--oracle-decimation K] [--threads N] [--csv FILE] [--keep DIR]
+//              [--placement auto|as_given] [--row-fraction F] [--normal-tolerance-mm T] [--footprint-samples K]
+//              [--oracle-decimation K] [--threads N] [--csv FILE] [--keep DIR]
 //
 // Shared meshes are scaled to a longest side of 200 mm and their edges refined to E mm (3): the fine model,
 // which is both what the job is given and the object on the table (a job's rough model is made from it at
@@ -80,6 +81,7 @@ struct Options {
   std::set<std::string> only;
   std::size_t rough_vertices = 5000;
   int threads = 2, oracle_decimation = 4, max_rounds = 4;
+  int footprint_samples = dm::JobSettings{}.footprint_samples;  // jobs.footprint_samples
   double refine_mm = 3.0;
   sp::CoverageOptions coverage;  // jobs.row_fraction, jobs.normal_tolerance_mm
   std::string placement;         // auto | as_given; empty: the shipped settings' placement.mode
@@ -102,12 +104,13 @@ std::optional<Options> parse_options(int argc, char** argv) {
     else if (a == "--placement") o.placement = value();
     else if (a == "--normal-tolerance-mm") o.coverage.normal_tolerance_mm = std::stod(value());
     else if (a == "--row-fraction") o.coverage.row_fraction = std::stod(value());
+    else if (a == "--footprint-samples") o.footprint_samples = std::stoi(value());
     else if (a == "--only") {
       std::stringstream ss(value());
       for (std::string t; std::getline(ss, t, ',');) o.only.insert(t);
     } else {
       std::cerr << "usage: bench_loop [--meshes DIR] [--only a,b] [--rough-vertices N] [--refine-mm E] [--max-rounds N] "
-                   "[--placement auto|as_given] [--row-fraction F] [--normal-tolerance-mm T] [--oracle-decimation K] "
+                   "[--placement auto|as_given] [--row-fraction F] [--normal-tolerance-mm T] [--footprint-samples K] [--oracle-decimation K] "
                    "[--threads N] [--csv FILE] [--keep DIR]\n";
       return std::nullopt;
     }
@@ -157,6 +160,7 @@ std::int64_t run_job(Rig& rig, const Options& o, const fs::path& mesh_file) {
   dm::JobSettings s;
   s.max_rounds = o.max_rounds;
   s.coverage = o.coverage;
+  s.footprint_samples = o.footprint_samples;
   s.scan_speed_mm_s = 400.0;  // the demo's sweep (the real cell's 50 mm/s × the drives' factor)
   s.planner_threads = o.threads;
   s.next_setup_min_area_mm2 = 0.0;  // one setup: what this cell measures of the object as it lies

@@ -169,6 +169,7 @@ void read_jobs(DaemonConfig& c, scancell::Section s) {
   j.retire_after_failures = s.ranged("retire_after_failures", j.retire_after_failures, 1, 10);
   j.failed_row_weight = s.ranged("failed_row_weight", j.failed_row_weight, 0.0, 1.0);
   j.min_gain_per_view_mm2 = s.ranged("min_gain_per_view_mm2", j.min_gain_per_view_mm2, 0.0, 1e6);
+  j.footprint_samples = s.ranged("footprint_samples", j.footprint_samples, 0, 64);
   j.next_setup_min_area_mm2 = s.ranged("next_setup_min_area_mm2", j.next_setup_min_area_mm2, 0.0, 1e6);
   j.max_setups = s.ranged("max_setups", j.max_setups, 1, kMaxSetups);
   j.sim_placement_error_mm = s.ranged("sim_placement_error_mm", j.sim_placement_error_mm, 0.0, 50.0);

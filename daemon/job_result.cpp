@@ -74,14 +74,17 @@ std::vector<std::uint8_t> given_up_rows(const std::vector<json>& round_infos, co
   const std::vector<std::uint8_t> fails = failure_counts(round_infos, measured);
   std::vector<std::uint8_t> out(fails.size(), 0);
   for (std::size_t r = 0; r < fails.size(); ++r) out[r] = fails[r] >= retire_after;
-  if (round_infos.size() > 1) {
-    const json& last = round_infos.back();
-    if (measured_now <= last.value("measured_before", 0.0) + 1e-9 ||
-        round_gains({last}, measured_now, total_mm2).back().at("under_20_percent").get<bool>())
-      for (const auto row : held_rows(last))
-        if (row < out.size() && !measured[row]) out[row] = 1;
-  }
+  if (replan_fell_short(round_infos, measured_now, total_mm2))
+    for (const auto row : held_rows(round_infos.back()))
+      if (row < out.size() && !measured[row]) out[row] = 1;
   return out;
+}
+
+bool replan_fell_short(const std::vector<json>& round_infos, double measured_now, double total_mm2) {
+  if (round_infos.size() < 2) return false;
+  const json& last = round_infos.back();
+  return measured_now <= last.value("measured_before", 0.0) + 1e-9 ||
+         round_gains({last}, measured_now, total_mm2).back().at("under_20_percent").get<bool>();
 }
 
 json round_gains(const std::vector<json>& round_infos, double measured_now, double total_mm2) {

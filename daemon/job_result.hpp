@@ -46,6 +46,11 @@ std::vector<std::uint8_t> failure_counts(const std::vector<nlohmann::json>& roun
 std::vector<std::uint8_t> given_up_rows(const std::vector<nlohmann::json>& round_infos, const std::vector<std::uint8_t>& measured,
                                         double measured_now, int retire_after, double total_mm2);
 
+/// Issue 15, the loop's one verdict on its last round: true when `round_infos` (one setup's executed rounds)
+/// ends in a replanning round (not the setup's first) that measured nothing new or realized under 20 % of
+/// its predicted gain. The loop stops after such a round, and `given_up_rows` gives up on its rows.
+bool replan_fell_short(const std::vector<nlohmann::json>& round_infos, double measured_now, double total_mm2);
+
 /// Each executed round's predicted and realized gain (mm²): realized is what the measured coverage rose by
 /// from the round's start to the next round's start (or to `measured_now` for the last).
 nlohmann::json round_gains(const std::vector<nlohmann::json>& round_infos, double measured_now, double total_mm2);

@@ -745,8 +745,8 @@ std::optional<JobState> JobRunner::close_or_replan(Job& j, std::int64_t plan, co
   // Issue 15: a replanning round that delivered under 20 % of its prediction is not repeated. The rows it
   // aimed at are not where, or not as, the rough model says, and the next plan would aim at them alike
   // (bench_loop: such rounds went on realizing 7-20 % while adding tens of views).
-  if (const json g = round_gains(infos, j.progress.measured, j.rough->total_area_mm2).back();
-      j.round > j.setup_first_round && g.at("under_20_percent").get<bool>()) {
+  if (replan_fell_short(infos, j.progress.measured, j.rough->total_area_mm2)) {
+    const json g = round_gains(infos, j.progress.measured, j.rough->total_area_mm2).back();
     return end_setup(j, JobState::stalled, "round " + std::to_string(j.round) + " realized " + fmt(g.at("realized_gain_mm2").get<double>(), 1) +
                                      " of the " + fmt(g.at("predicted_gain_mm2").get<double>(), 1) +
                                      " mm2 it predicted (under 20 %): the loop stops rather than repeat it; " + std::to_string(n_retired) +
@@ -776,6 +776,13 @@ std::optional<JobState> JobRunner::replan(Job& j, const std::vector<std::uint8_t
     if (retired[r]) measured[r] = 1;
     else if (fails[r] > 0) weight_scale[r] = settings_.failed_row_weight;
   }
+  // Open rows are mostly partly filled: each is predicted by samples of what it lacks (issue 15).
+  std::vector<std::uint32_t> open_rows;
+  for (std::uint32_t r = 0; r < measured.size(); ++r)
+    if (!measured[r]) open_rows.push_back(r);
+  const sp::RowFootprints footprints =
+      settings_.footprint_samples > 0 ? j.coverage->open_footprints(open_rows, static_cast<std::size_t>(settings_.footprint_samples))
+                                      : sp::RowFootprints{};
   sp::ViewPlan p = plan_or_stop([&] {
     // The object rests as the setup's first round placed it: in setup 1 the configured or chosen orientation
     // (placed on the plate again, the same way), in a further setup exactly where its alignment found it.
@@ -783,7 +790,7 @@ std::optional<JobState> JobRunner::replan(Job& j, const std::vector<std::uint8_t
     if (j.setup > 1) resting = resting_at(models_.cell, j.object, j.cell.object_on_table);
     else resting.object_on_table.linear() = j.cell.object_on_table.linear();
     return sp::plan_views(j.object, models_.sensor, j.spec, replan, j.rough_options, settings_.planner_threads,
-                          &resting, &measured, &weight_scale, &stop);
+                          &resting, &measured, &weight_scale, &stop, settings_.footprint_samples > 0 ? &footprints : nullptr);
   }, stop);
   if (p.views.empty()) {
     return end_setup(j, JobState::stalled, "replan adds nothing: " + summary);
@@ -796,6 +803,7 @@ std::optional<JobState> JobRunner::replan(Job& j, const std::vector<std::uint8_t
   }
   json rinfo = round_info(j, p, j.round + 1, j.setup, measured);
   rinfo["retired_rows"] = n_retired;
+  rinfo["footprint_rows"] = footprints.size();
   journal_.add_plan(j.id, j.round + 1, view_records(p), rinfo.dump());
   return std::nullopt;
 }

@@ -45,6 +45,10 @@ struct JobSettings {
   int retire_after_failures = 3;
   double failed_row_weight = 0.25;
   double min_gain_per_view_mm2 = 5.0;
+  /// A replan predicts each open row by up to this many samples of its unfilled footprint cells, not by its
+  /// vertex (planner/core/footprint.hpp): a view is credited with the row only when it is predicted to fill
+  /// what the row lacks. 0: by the vertex, as the first round does.
+  int footprint_samples = 8;
   /// Issue 20: a job that ends (done or stalled) with at least this much of the rough model unmeasured plans
   /// a second setup: the stable resting pose that lets the cell measure most of the rest, named in the
   /// result with a picture (next_setup.png). 0: never.

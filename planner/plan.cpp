@@ -379,12 +379,51 @@ void record_views(ViewPlan& p, const MeasurabilityMatrix& matrix, const std::vec
     }
 }
 
+/// record_views for a cover over footprint samples (footprint.hpp): a footprint row is predicted when the
+/// chosen views together measure enough of its samples, and each view is said to measure the predicted rows it
+/// contributes samples to. Rows the candidates cannot measure are the rough model's rows: a footprint row
+/// whose samples no candidate measures, not its samples.
+void record_views_by_samples(ViewPlan& p, const SampleCover& c, const RowFootprints& f, const std::vector<Viewpoint>& candidates,
+                             const std::vector<std::uint8_t>* measured_rows) {
+  const std::vector<std::uint8_t> finished = finished_rows(c, f, p.cover.views);
+  std::vector<std::uint8_t> predicted(p.rough.size(), 0);
+  for (auto j : p.cover.views) {
+    p.views.push_back(candidates[j]);
+    std::vector<std::uint32_t>& rows = p.view_rows.emplace_back();
+    for (auto r : column_rows(c, f, j, finished))
+      if (!(measured_rows && (*measured_rows)[r])) {
+        rows.push_back(r);
+        predicted[r] = 1;
+      }
+  }
+  for (std::uint32_t r = 0; r < predicted.size(); ++r)
+    if (predicted[r]) {
+      p.predicted_rows.push_back(r);
+      p.predicted_gain_mm2 += p.rough.area_mm2[r];
+    }
+  std::vector<std::uint8_t> sample_seen(c.owner.size(), 0);
+  for (const auto& col : c.matrix.columns)
+    col.for_each([&](std::uint32_t r) {
+      if (r >= c.n_rows) sample_seen[r - c.n_rows] = 1;
+    });
+  std::vector<std::uint32_t> unmeasurable;
+  for (auto r : p.cover.unmeasurable_rows)
+    if (r < c.n_rows) unmeasurable.push_back(r);
+  for (std::size_t k = 0; k < f.size(); ++k)
+    if (std::none_of(sample_seen.begin() + f.first[k], sample_seen.begin() + f.first[k + 1], [](std::uint8_t b) { return b != 0; }))
+      unmeasurable.push_back(f.rows[k]);
+  std::sort(unmeasurable.begin(), unmeasurable.end());
+  unmeasurable.erase(std::unique(unmeasurable.begin(), unmeasurable.end()), unmeasurable.end());
+  p.cover.unmeasurable_rows = unmeasurable;
+}
+
 }  // namespace
 
 ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const ModelSpec& spec,
                     const PlannerSettings& settings_in, const RoughModelOptions& rough_options, int threads,
                     const CellModel* cell_in, const std::vector<std::uint8_t>* measured_rows,
-                    const std::vector<double>* row_weight_scale, const std::atomic<int>* cancel) {
+                    const std::vector<double>* row_weight_scale, const std::atomic<int>* cancel,
+                    const RowFootprints* footprints) {
   // A non-zero `cancel` stops planning at the next stage boundary, or inside the matrix build (the long stage).
   auto check = [cancel](const char* stage) {
     if (cancel && cancel->load() != 0) throw PlanCancelled(std::string("planning stopped by request after ") + stage);
@@ -444,6 +483,14 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
 
     t = Clock::now();
     const MeasurabilityMatrix matrix = make_matrix(stage, scene, settings_in.matrix.countermeasures, candidates);
+    std::optional<SampleCover> samples;
+    if (footprints) {
+      for (auto r : footprints->rows)
+        if (measured_rows && r < measured_rows->size() && (*measured_rows)[r])
+          throw DataError("replan: row " + std::to_string(r) + " has a footprint to predict and is flagged measured");
+      samples = cover_by_samples(matrix, row_weight, *footprints, scene, sensor, spec, candidates, settings.matrix,
+                                 p.rough.mean_edge_mm, cancel);
+    }
     p.candidates = candidates.size();
     p.matrix_density = matrix.density();
     p.matrix_bytes = matrix.memory_bytes();
@@ -453,8 +500,13 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     t = Clock::now();
     const std::vector<JointVector> q_of = axis_targets(p, candidates);
     check("the axis targets");
-    choose_cover(p, matrix, row_weight, candidates, q_of);
-    record_views(p, matrix, candidates, measured_rows);
+    if (samples) {
+      choose_cover(p, samples->matrix, samples->weight, candidates, q_of);
+      record_views_by_samples(p, *samples, *footprints, candidates, measured_rows);
+    } else {
+      choose_cover(p, matrix, row_weight, candidates, q_of);
+      record_views(p, matrix, candidates, measured_rows);
+    }
     if (settings.keep_candidates) p.candidate_views = candidates;
     p.times.cover_s = seconds_since(t);
   });

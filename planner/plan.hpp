@@ -17,6 +17,7 @@
 #include "planner/core/cover.hpp"
 #include "planner/core/exact_cover.hpp"
 #include "planner/core/local_cover.hpp"
+#include "planner/core/footprint.hpp"
 #include "planner/core/measurability.hpp"
 #include "planner/geometry/mesh.hpp"
 #include "planner/core/rough_model.hpp"
@@ -87,11 +88,14 @@ struct ViewPlan {
 /// the rows to cover; the estimate then refers to the remaining area only. `row_weight_scale` (one factor per
 /// row, optional) down-weighs rows in the cover: rows the executed views were predicted to measure and did
 /// not weigh less, so that no view is planned chiefly for them (their gain may fall under
-/// cover.min_view_gain_mm2).
+/// cover.min_view_gain_mm2). `footprints` (optional, issue 15) replaces the vertex test of the rows it names
+/// by the samples of what each still lacks (planner/core/footprint.hpp): a view is credited with such a row
+/// only when it is predicted to fill enough of the row's unfilled footprint.
 ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const ModelSpec& spec,
                     const PlannerSettings& settings, const RoughModelOptions& rough_options, int threads = 0,
                     const CellModel* cell = nullptr, const std::vector<std::uint8_t>* measured_rows = nullptr,
-                    const std::vector<double>* row_weight_scale = nullptr, const std::atomic<int>* cancel = nullptr);
+                    const std::vector<double>* row_weight_scale = nullptr, const std::atomic<int>* cancel = nullptr,
+                    const RowFootprints* footprints = nullptr);
 
 /// The documented plan file (docs/plan-format.md).
 nlohmann::json plan_to_json(const ViewPlan& plan);

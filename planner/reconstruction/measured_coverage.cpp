@@ -54,11 +54,18 @@ MeasuredCoverage::MeasuredCoverage(const RoughModel& rough, const ModelSpec& spe
   }
   // Footprints: per adjacent triangle, the quad (vertex, edge midpoint, centroid, edge midpoint), projected
   // into the row's tangent plane and rasterised by cell centre; the vertex's own cell always belongs.
-  footprint_.assign(n, {});
+  // Each cell also keeps where its centre lies on the triangle it came from, with that triangle's normal: the
+  // samples a replan predicts an open row's unfilled cells by (open_footprints).
+  struct Cell {
+    std::uint32_t key;
+    Eigen::Vector3f point, normal;
+  };
+  std::vector<std::vector<Cell>> cells(n);
   bend_.assign(n, 0.0);
   double extent = 0.0, max_bend = 0.0;
   for (const auto& t : rough.triangles) {
     const Eigen::Vector3d centroid = (points_[t[0]] + points_[t[1]] + points_[t[2]]) / 3.0;
+    const Eigen::Vector3d face = (points_[t[1]] - points_[t[0]]).cross(points_[t[2]] - points_[t[0]]);
     for (int k = 0; k < 3; ++k) {
       const std::uint32_t i = t[k];
       const Eigen::Vector3d& p = points_[i];
@@ -73,16 +80,34 @@ MeasuredCoverage::MeasuredCoverage(const RoughModel& rough, const ModelSpec& spe
         poly.emplace_back(d.dot(u_[i]) / cell_, d.dot(v_[i]) / cell_);
         box.extend(poly.back());
       }
+      // The cell centre lifted from the tangent plane onto the triangle's plane, along the row's normal
+      // (a triangle steeper than 80° to the tangent plane keeps the centre in the tangent plane).
+      Eigen::Vector3d fn = face.norm() > 0.0 ? face.normalized() : normals_[i];
+      if (fn.dot(normals_[i]) < 0.0) fn = -fn;
+      const double lift_den = fn.dot(normals_[i]);
       for (long iu = std::lround(std::floor(box.min().x())); iu <= std::lround(std::ceil(box.max().x())); ++iu)
         for (long iv = std::lround(std::floor(box.min().y())); iv <= std::lround(std::ceil(box.max().y())); ++iv)
-          if (inside_convex(poly, Eigen::Vector2d(static_cast<double>(iu), static_cast<double>(iv))))
-            footprint_[i].push_back(cell_key(iu, iv));
+          if (inside_convex(poly, Eigen::Vector2d(static_cast<double>(iu), static_cast<double>(iv)))) {
+            const Eigen::Vector3d d = cell_ * (static_cast<double>(iu) * u_[i] + static_cast<double>(iv) * v_[i]);
+            const double h = lift_den > 0.17 ? -d.dot(fn) / lift_den : 0.0;
+            cells[i].push_back({cell_key(iu, iv), (p + d + h * normals_[i]).cast<float>(), fn.cast<float>()});
+          }
     }
   }
-  for (auto& f : footprint_) {
-    f.push_back(cell_key(0, 0));
-    std::sort(f.begin(), f.end());
-    f.erase(std::unique(f.begin(), f.end()), f.end());
+  footprint_.assign(n, {});
+  cell_point_.assign(n, {});
+  cell_normal_.assign(n, {});
+  for (std::size_t i = 0; i < n; ++i) {
+    auto& c = cells[i];
+    c.push_back({cell_key(0, 0), points_[i].cast<float>(), normals_[i].cast<float>()});
+    // The first triangle's lift of a cell that several triangles share: deterministic (triangle order).
+    std::stable_sort(c.begin(), c.end(), [](const Cell& a, const Cell& b) { return a.key < b.key; });
+    c.erase(std::unique(c.begin(), c.end(), [](const Cell& a, const Cell& b) { return a.key == b.key; }), c.end());
+    for (const auto& e : c) {
+      footprint_[i].push_back(e.key);
+      cell_point_[i].push_back(e.point);
+      cell_normal_[i].push_back(e.normal);
+    }
   }
   filled_.resize(n);
   for (std::size_t i = 0; i < n; ++i) filled_[i].assign(footprint_[i].size(), 0);
@@ -156,6 +181,36 @@ std::size_t MeasuredCoverage::add(const RangeImage& img, const std::vector<std::
       landed += any;
     }
   return landed;
+}
+
+RowFootprints MeasuredCoverage::open_footprints(const std::vector<std::uint32_t>& rows, std::size_t max_samples) const {
+  if (max_samples == 0) throw ConfigError("open_footprints: max_samples must be at least 1");
+  RowFootprints f;
+  std::vector<std::uint32_t> sorted = rows;
+  std::sort(sorted.begin(), sorted.end());
+  sorted.erase(std::unique(sorted.begin(), sorted.end()), sorted.end());
+  for (const auto r : sorted) {
+    if (r >= this->rows()) throw DataError("open_footprints: row " + std::to_string(r) + " past the " + std::to_string(this->rows()) + " rows");
+    const std::size_t cells = footprint_[r].size();
+    const auto need = static_cast<std::size_t>(std::ceil(options_.row_fraction * static_cast<double>(cells) - 1e-9));
+    if (filled_count_[r] >= need) continue;  // measured already
+    std::vector<std::size_t> open;
+    for (std::size_t c = 0; c < cells; ++c)
+      if (!filled_[r][c]) open.push_back(c);
+    // At most max_samples of the unfilled cells, evenly through them (keys are row-major in the tangent
+    // plane, so every part of the gap is sampled); a view must measure the share of them the row lacks.
+    const std::size_t k = std::min(open.size(), max_samples);
+    for (std::size_t s = 0; s < k; ++s) {
+      const std::size_t c = open[(2 * s + 1) * open.size() / (2 * k)];
+      f.points.push_back(cell_point_[r][c].cast<double>());
+      f.normals.push_back(cell_normal_[r][c].cast<double>().normalized());
+    }
+    const double share = static_cast<double>(need - filled_count_[r]) / static_cast<double>(open.size());
+    f.rows.push_back(r);
+    f.needed.push_back(static_cast<std::uint32_t>(std::max(1.0, std::ceil(share * static_cast<double>(k) - 1e-9))));
+    f.first.push_back(static_cast<std::uint32_t>(f.points.size()));
+  }
+  return f;
 }
 
 double MeasuredCoverage::row_fraction(std::size_t row) const {

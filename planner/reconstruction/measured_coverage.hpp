@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "planner/core/footprint.hpp"
 #include "planner/core/rough_model.hpp"
 #include "planner/core/sensor.hpp"
 #include "planner/scan/range_image.hpp"
@@ -43,6 +44,11 @@ class MeasuredCoverage {
   /// Area of the measured rows over the rough model's area.
   double coverage() const;
   std::size_t footprint_cells(std::size_t row) const { return footprint_[row].size(); }
+  /// What `rows` (those not yet measured; measured ones are skipped) still lack, for a replan's footprint
+  /// prediction (planner/core/footprint.hpp): per row up to `max_samples` of its unfilled cells, each as the
+  /// cell centre on the rough-model triangle it came from with that triangle's normal, and how many of them one
+  /// view must measure to bring the row to `row_fraction` (the share it lacks of its unfilled cells, rounded up).
+  RowFootprints open_footprints(const std::vector<std::uint32_t>& rows, std::size_t max_samples) const;
 
  private:
   struct Grid;
@@ -53,6 +59,7 @@ class MeasuredCoverage {
   CoverageOptions options_;
   double cell_ = 1.0, tolerance_ = 2.0, reach_ = 1.0;
   std::vector<std::vector<std::uint32_t>> footprint_;  // sorted cell keys per row
+  std::vector<std::vector<Eigen::Vector3f>> cell_point_, cell_normal_;  // per footprint cell: on its triangle
   std::vector<double> bend_;                           // per row: how far its footprint leaves its tangent plane
   std::vector<std::vector<std::uint8_t>> filled_;      // per footprint cell
   std::vector<std::size_t> filled_count_;

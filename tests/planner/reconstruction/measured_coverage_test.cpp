@@ -90,6 +90,77 @@ TEST(MeasuredCoverage, ARowFacingAwayFromTheLaserIsNotMeasuredThroughTheWall) {
   (void)top_rows;
 }
 
+std::uint32_t row_near(const RoughModel& rm, const Eigen::Vector3d& p) {
+  std::uint32_t best = 0;
+  for (std::uint32_t i = 0; i < rm.size(); ++i)
+    if ((rm.points[i] - p).squaredNorm() < (rm.points[best] - p).squaredNorm()) best = i;
+  return best;
+}
+
+TEST(MeasuredCoverage, OpenFootprintsSampleWhatARowLacks) {
+  // The view of the first test fills |x| < 36 mm. Cells are 1/√2 mm (the spec's 2 /mm²).
+  const TriangleMesh plane = testing::flat_patch(200.0, 4.0);
+  const RoughModel rough = make_rough_model(plane);
+  MeasuredCoverage cov(rough, thesis_spec());
+  cov.add(scan_plane_from(plane, 150.0, 60.0));
+  const std::uint32_t inside = row_near(rough, {0, 0, 0}), edge = row_near(rough, {36, 0, 0}), beyond = row_near(rough, {60, 0, 0});
+  ASSERT_TRUE(cov.measured(inside));
+  ASSERT_GT(cov.row_fraction(edge), 0.2);
+  ASSERT_LT(cov.row_fraction(edge), 0.9);
+  ASSERT_EQ(cov.row_fraction(beyond), 0.0);
+  const RowFootprints f = cov.open_footprints({beyond, inside, edge}, 8);
+  // The measured row is left out; rows come in ascending order.
+  ASSERT_EQ(f.size(), 2u);
+  EXPECT_EQ(f.rows, (std::vector<std::uint32_t>{std::min(edge, beyond), std::max(edge, beyond)}));
+  for (std::size_t k = 0; k < f.size(); ++k) {
+    const std::uint32_t r = f.rows[k];
+    EXPECT_EQ(f.first[k + 1] - f.first[k], 8u);
+    for (std::uint32_t s = f.first[k]; s < f.first[k + 1]; ++s) {
+      // On the plane, within the row's footprint (the vertex, edge midpoints and centroids: ±2 mm and a half
+      // cell), with the plane's normal.
+      EXPECT_NEAR(f.points[s].z(), 0.0, 1e-6);
+      EXPECT_LE((f.points[s] - rough.points[r]).cwiseAbs().maxCoeff(), 2.0 + 0.36);
+      EXPECT_NEAR(f.normals[s].z(), 1.0, 1e-6);
+      // The edge row's samples are all where the view did not reach.
+      if (r == edge) {
+        EXPECT_GT(f.points[s].x(), 36.0 - 0.36) << f.points[s].transpose();
+      }
+    }
+    // A view must fill what the row lacks of 0.9 of its cells: an empty row of c cells needs ⌈0.9 c⌉ of its
+    // c (all but the last tenth), i.e. ⌈8·⌈0.9 c⌉/c⌉ of 8 samples.
+    const double c = static_cast<double>(cov.footprint_cells(r));
+    const double filled = cov.row_fraction(r) * c;
+    const double lacks = std::ceil(0.9 * c - 1e-9) - filled;
+    EXPECT_EQ(f.needed[k], static_cast<std::uint32_t>(std::ceil(8.0 * lacks / (c - filled) - 1e-9))) << "row " << r << ", " << c << " cells";
+  }
+  // The empty row: 8 of its 8 samples whenever it has fewer than 80 cells (⌈0.9 c⌉/c > 7/8).
+  const std::size_t k_beyond = f.rows[0] == beyond ? 0 : 1;
+  ASSERT_LT(cov.footprint_cells(beyond), 80u);
+  EXPECT_EQ(f.needed[k_beyond], 8u);
+}
+
+TEST(MeasuredCoverage, OpenFootprintSamplesLieOnTheFacesOfABentFootprint) {
+  // A 90° roof ridge along y (z = −|x|): the ridge row's tangent plane is z = 0, its footprint bends down
+  // both faces. Its samples lie on the faces, each with its face's normal, not in the tangent plane.
+  TriangleMesh roof = testing::flat_patch(40.0, 4.0);
+  for (auto& v : roof.vertices) v.z() = -std::abs(v.x());
+  const RoughModel rough = make_rough_model(roof);
+  MeasuredCoverage cov(rough, thesis_spec());
+  const std::uint32_t ridge = row_near(rough, {0, 0, 0});
+  const RowFootprints f = cov.open_footprints({ridge}, 64);
+  ASSERT_EQ(f.size(), 1u);
+  std::size_t off_ridge = 0;
+  for (std::uint32_t s = f.first[0]; s < f.first[1]; ++s) {
+    const Eigen::Vector3d& p = f.points[s];
+    EXPECT_NEAR(p.z(), -std::abs(p.x()), 1e-6) << p.transpose();
+    if (std::abs(p.x()) > 0.1) {
+      ++off_ridge;
+      EXPECT_NEAR(f.normals[s].dot(Eigen::Vector3d(p.x() > 0 ? 1.0 : -1.0, 0.0, 1.0).normalized()), 1.0, 1e-6);
+    }
+  }
+  EXPECT_GT(off_ridge, 4u);
+}
+
 TEST(Replan, MeasuredRowsLeaveTheCover) {
   const TriangleMesh patch = convex_patch(100.0, 0.04, 2.0);
   const SensorModel sensor = thesis_sensor();

@@ -1,0 +1,100 @@
+#include "planner/core/footprint.hpp"
+
+#include <algorithm>
+#include <string>
+
+#include "common/errors.hpp"
+
+namespace scancell::planner {
+
+void RowFootprints::validate(std::uint32_t n_rows) const {
+  const std::string what = "row footprints: ";
+  if (first.size() != rows.size() + 1 || first.front() != 0 || first.back() != points.size())
+    throw DataError(what + "offsets do not span the " + std::to_string(points.size()) + " samples of " + std::to_string(rows.size()) + " rows");
+  if (normals.size() != points.size() || needed.size() != rows.size())
+    throw DataError(what + std::to_string(normals.size()) + " normals and " + std::to_string(needed.size()) + " needed counts for " +
+                    std::to_string(points.size()) + " samples of " + std::to_string(rows.size()) + " rows");
+  for (std::size_t k = 0; k < rows.size(); ++k) {
+    if (rows[k] >= n_rows || (k > 0 && rows[k] <= rows[k - 1]))
+      throw DataError(what + "row " + std::to_string(rows[k]) + " (entry " + std::to_string(k) + ") is out of order or past the " +
+                      std::to_string(n_rows) + " rows");
+    if (first[k + 1] < first[k] || needed[k] > first[k + 1] - first[k])
+      throw DataError(what + "row " + std::to_string(rows[k]) + " needs " + std::to_string(needed[k]) + " of its " +
+                      std::to_string(first[k + 1] - first[k]) + " samples");
+  }
+}
+
+SampleCover cover_by_samples(const MeasurabilityMatrix& matrix, const std::vector<double>& row_weight, const RowFootprints& f,
+                             const OcclusionScene& scene, const SensorModel& sensor, const ModelSpec& spec,
+                             const std::vector<Viewpoint>& candidates, const MatrixSettings& settings, double mean_edge_mm,
+                             const std::atomic<int>* cancel) {
+  f.validate(matrix.n_rows);
+  if (candidates.size() != matrix.n_cols())
+    throw DataError("row footprints: " + std::to_string(candidates.size()) + " candidates for a matrix of " +
+                    std::to_string(matrix.n_cols()) + " columns");
+  if (row_weight.size() != matrix.n_rows)
+    throw DataError("row footprints: " + std::to_string(row_weight.size()) + " row weights for " + std::to_string(matrix.n_rows) + " rows");
+  SampleCover c;
+  c.n_rows = matrix.n_rows;
+  const auto n_samples = static_cast<std::uint32_t>(f.points.size());
+  c.owner.resize(n_samples);
+  for (std::size_t k = 0; k < f.size(); ++k)
+    for (std::uint32_t s = f.first[k]; s < f.first[k + 1]; ++s) c.owner[s] = static_cast<std::uint32_t>(k);
+  c.weight = row_weight;
+  c.weight.resize(matrix.n_rows + n_samples, 0.0);
+  std::vector<std::uint8_t> is_footprint_row(matrix.n_rows, 0);
+  for (std::size_t k = 0; k < f.size(); ++k) {
+    const std::uint32_t r = f.rows[k], n = f.first[k + 1] - f.first[k];
+    is_footprint_row[r] = 1;
+    for (std::uint32_t s = f.first[k]; s < f.first[k + 1]; ++s) c.weight[matrix.n_rows + s] = row_weight[r] / n;
+    c.weight[r] = 0.0;
+  }
+  // The samples as rows of their own: the matrix builder's element test, culling and rays, unchanged. They
+  // come row by row in the rough model's Morton order, so its culling blocks stay compact.
+  RoughModel samples;
+  samples.points = f.points;
+  samples.normals = f.normals;
+  samples.area_mm2.assign(f.points.size(), 0.0);
+  samples.mean_edge_mm = mean_edge_mm;  // the same ray offset as the rows'
+  const MeasurabilityMatrix by_sample =
+      f.points.empty() ? MeasurabilityMatrix{0, std::vector<MeasurabilityColumn>(candidates.size())}
+                       : build_measurability(samples, scene, sensor, spec, candidates, settings, nullptr, cancel);
+  c.matrix.n_rows = matrix.n_rows + n_samples;
+  c.matrix.columns.resize(matrix.n_cols());
+  for (std::size_t j = 0; j < matrix.n_cols(); ++j) {
+    std::vector<std::uint32_t> rows;
+    matrix.columns[j].for_each([&](std::uint32_t r) {
+      if (!is_footprint_row[r]) rows.push_back(r);
+    });
+    by_sample.columns[j].for_each([&](std::uint32_t s) { rows.push_back(matrix.n_rows + s); });
+    c.matrix.columns[j] = MeasurabilityColumn(std::move(rows), c.matrix.n_rows);
+  }
+  return c;
+}
+
+std::vector<std::uint8_t> finished_rows(const SampleCover& c, const RowFootprints& f, const std::vector<std::uint32_t>& views) {
+  std::vector<std::uint8_t> seen(c.owner.size(), 0), out(c.n_rows, 0);
+  std::vector<std::uint32_t> count(f.size(), 0);
+  for (const auto j : views)
+    c.matrix.columns.at(j).for_each([&](std::uint32_t r) {
+      if (r < c.n_rows || seen[r - c.n_rows]) return;
+      seen[r - c.n_rows] = 1;
+      ++count[c.owner[r - c.n_rows]];
+    });
+  for (std::size_t k = 0; k < f.size(); ++k) out[f.rows[k]] = f.needed[k] > 0 && count[k] >= f.needed[k];
+  return out;
+}
+
+std::vector<std::uint32_t> column_rows(const SampleCover& c, const RowFootprints& f, std::uint32_t column,
+                                       const std::vector<std::uint8_t>& finished) {
+  std::vector<std::uint32_t> rows;
+  c.matrix.columns.at(column).for_each([&](std::uint32_t r) {
+    if (r < c.n_rows) rows.push_back(r);
+    else if (const std::uint32_t row = f.rows[c.owner[r - c.n_rows]]; finished[row]) rows.push_back(row);
+  });
+  std::sort(rows.begin(), rows.end());
+  rows.erase(std::unique(rows.begin(), rows.end()), rows.end());
+  return rows;
+}
+
+}  // namespace scancell::planner

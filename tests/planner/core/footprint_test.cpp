@@ -1,0 +1,138 @@
+// The closed loop's footprint prediction (issue 15): a row is credited to a view only when the view measures
+// enough samples of what the row still lacks, whatever its vertex's own test says.
+#include <algorithm>
+
+#include <gtest/gtest.h>
+
+#include "common/errors.hpp"
+#include "planner/config.hpp"
+#include "planner/core/footprint.hpp"
+#include "test_meshes.hpp"
+
+namespace scancell::planner {
+namespace {
+
+/// A camera 150 mm straight above (x, 0) on the z = 0 plane, sweeping 60 mm along y.
+Viewpoint above(double x) {
+  Viewpoint v;
+  v.position = Eigen::Vector3d(x, 0.0, 150.0);
+  v.axis = -Eigen::Vector3d::UnitZ();
+  v.twist_rad = twist_towards(v.axis, Eigen::Vector3d::UnitY());
+  v.standoff_mm = 150.0;
+  v.scan_length_mm = 60.0;
+  return v;
+}
+
+std::uint32_t row_at(const RoughModel& rm, const Eigen::Vector3d& p) {
+  std::uint32_t best = 0;
+  for (std::uint32_t i = 0; i < rm.size(); ++i)
+    if ((rm.points[i] - p).squaredNorm() < (rm.points[best] - p).squaredNorm()) best = i;
+  return best;
+}
+
+struct Fixture {
+  TriangleMesh plane = testing::flat_patch(200.0, 4.0);
+  RoughModel rough = make_rough_model(plane);
+  OcclusionScene scene{plane};
+  SensorModel sensor = load_sensor(testing::source_path("config/sensors/line-scan-thesis.yaml"));
+  ModelSpec spec = load_spec(testing::source_path("config/spec/thesis.yaml"));
+  // The profile spans x ± 150·tan(fov_x/2) (36 mm) on the plane.
+  double half_x = 150.0 * std::tan(0.5 * sensor.fov_x_rad);
+};
+
+/// The row at (60, 0) with five samples of its footprint along x at 58 … 62 mm.
+RowFootprints five_samples(std::uint32_t row, std::uint32_t needed) {
+  RowFootprints f;
+  f.rows = {row};
+  for (int k = 0; k < 5; ++k) {
+    f.points.emplace_back(58.0 + k, 0.0, 0.0);
+    f.normals.emplace_back(Eigen::Vector3d::UnitZ());
+  }
+  f.first = {0, 5};
+  f.needed = {needed};
+  return f;
+}
+
+std::vector<std::uint32_t> samples_in(const SampleCover& c, std::uint32_t column) {
+  std::vector<std::uint32_t> out;
+  c.matrix.columns[column].for_each([&](std::uint32_t r) {
+    if (r >= c.n_rows) out.push_back(r - c.n_rows);
+  });
+  return out;
+}
+
+TEST(FootprintPrediction, ViewsAreCreditedWithTheSamplesTheyMeasureAndFinishRowsTogether) {
+  const Fixture fx;
+  const std::uint32_t row = row_at(fx.rough, {60.0, 0.0, 0.0});
+  const std::uint32_t centre = row_at(fx.rough, {0.0, 0.0, 0.0});
+  ASSERT_NEAR(fx.rough.points[row].x(), 60.0, 1e-9);
+  // Frusta on the plane: A |x| < 36 (neither the vertex nor a sample); B 24 … 96 (all five); C from 59.5
+  // (the vertex and the samples at 60, 61, 62); D from 60.5 (61 and 62, not the vertex); E up to 59.5 (58
+  // and 59, not the vertex).
+  const std::vector<Viewpoint> views{above(0.0), above(60.0), above(59.5 + fx.half_x), above(60.5 + fx.half_x),
+                                     above(59.5 - fx.half_x)};
+  const MeasurabilityMatrix m = build_measurability(fx.rough, fx.scene, fx.sensor, fx.spec, views);
+  ASSERT_TRUE(m.columns[2].contains(row));   // the vertex test credits C with the row
+  ASSERT_FALSE(m.columns[3].contains(row));  // and not D
+  std::vector<double> weight(fx.rough.size(), 1.0);
+  weight[row] = 10.0;
+  const SampleCover c = cover_by_samples(m, weight, five_samples(row, 5), fx.scene, fx.sensor, fx.spec, views, {}, fx.rough.mean_edge_mm);
+  ASSERT_EQ(c.matrix.n_rows, fx.rough.size() + 5);
+  EXPECT_TRUE(samples_in(c, 0).empty());
+  EXPECT_EQ(samples_in(c, 1), (std::vector<std::uint32_t>{0, 1, 2, 3, 4}));
+  EXPECT_EQ(samples_in(c, 2), (std::vector<std::uint32_t>{2, 3, 4}));
+  EXPECT_EQ(samples_in(c, 3), (std::vector<std::uint32_t>{3, 4}));
+  EXPECT_EQ(samples_in(c, 4), (std::vector<std::uint32_t>{0, 1}));
+  // The row itself leaves the cover; its weight is shared by its samples. Other rows keep theirs.
+  EXPECT_EQ(c.weight[row], 0.0);
+  for (std::uint32_t s = 0; s < 5; ++s) EXPECT_DOUBLE_EQ(c.weight[fx.rough.size() + s], 2.0);
+  for (std::size_t j = 0; j < views.size(); ++j) {
+    EXPECT_FALSE(c.matrix.columns[j].contains(row));
+    EXPECT_EQ(c.matrix.columns[j].contains(centre), m.columns[j].contains(centre));
+  }
+  // Finished: all five samples by B alone, or by C and E together (neither alone), not by C and D.
+  auto finished = [&](std::uint32_t needed, std::vector<std::uint32_t> chosen) {
+    return finished_rows(c, five_samples(row, needed), chosen)[row] != 0;
+  };
+  EXPECT_TRUE(finished(5, {1}));
+  EXPECT_FALSE(finished(5, {2}));
+  EXPECT_FALSE(finished(5, {4}));
+  EXPECT_TRUE(finished(5, {2, 4}));
+  EXPECT_FALSE(finished(5, {2, 3}));
+  EXPECT_TRUE(finished(3, {2}));
+  EXPECT_TRUE(finished(2, {3}));  // D, whose vertex test fails
+  // A view is said to measure the finished rows it contributes samples to.
+  const std::vector<std::uint8_t> done = finished_rows(c, five_samples(row, 5), {2, 4});
+  const auto rows_c = column_rows(c, five_samples(row, 5), 2, done), rows_a = column_rows(c, five_samples(row, 5), 0, done);
+  EXPECT_TRUE(std::binary_search(rows_c.begin(), rows_c.end(), row));
+  EXPECT_FALSE(std::binary_search(rows_a.begin(), rows_a.end(), row));
+}
+
+TEST(FootprintPrediction, InconsistentFootprintsAreRefusedByWhatIsWrong) {
+  const Fixture fx;
+  const std::vector<Viewpoint> views{above(0.0)};
+  const MeasurabilityMatrix m = build_measurability(fx.rough, fx.scene, fx.sensor, fx.spec, views);
+  const std::vector<double> weight(fx.rough.size(), 1.0);
+  auto refused = [&](const RowFootprints& f) {
+    try {
+      cover_by_samples(m, weight, f, fx.scene, fx.sensor, fx.spec, views, {}, fx.rough.mean_edge_mm);
+    } catch (const DataError& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  RowFootprints too_many = five_samples(3, 6);
+  EXPECT_NE(refused(too_many).find("row 3 needs 6 of its 5 samples"), std::string::npos) << refused(too_many);
+  RowFootprints past = five_samples(m.n_rows, 1);
+  EXPECT_NE(refused(past).find("past the"), std::string::npos) << refused(past);
+  RowFootprints offsets = five_samples(3, 1);
+  offsets.first = {0, 4};
+  EXPECT_NE(refused(offsets).find("offsets"), std::string::npos) << refused(offsets);
+  // No footprints: the matrix and weights as they were.
+  const SampleCover none = cover_by_samples(m, weight, RowFootprints{}, fx.scene, fx.sensor, fx.spec, views, {}, 1.0);
+  EXPECT_EQ(none.matrix.nonzeros(), m.nonzeros());
+  EXPECT_EQ(none.weight, weight);
+}
+
+}  // namespace
+}  // namespace scancell::planner
