@@ -71,6 +71,45 @@ std::vector<Fired> sweep_pass(dr::Positioner& positioner, ScanHead& head, const 
   return fired;
 }
 
+/// One pass of the sweep with the drive's position compare triggering the scanner (scanner.trigger_source:
+/// drive_compare): armed for rows `first` … `first` + `rows` − 1 (row r at `start` + r `pitch`), then the move
+/// to `end` at `speed`; each pulse the drive reports is a profile whose pose is the kinematics at its compare
+/// position, not at a position read back. Rows the move did not reach (a halt, a fault) get no pulse.
+std::vector<Fired> compare_pass(dr::Positioner& positioner, ScanHead& head, const sp::CellModel& cell, std::vector<double> qs,
+                                double start, int first, int rows, double end, double pitch, double speed,
+                                std::chrono::milliseconds timeout, const std::atomic<int>& stop) {
+  const std::size_t sweep = cell.axis_index("sweep");
+  dr::Axis& sweep_axis = positioner.axis("sweep");
+  std::vector<Fired> fired;
+  auto take_up_to = [&](int pulses) {
+    for (int k = static_cast<int>(fired.size()); k < std::min(pulses, rows); ++k) {
+      qs[sweep] = start + (first + k) * pitch;
+      const Eigen::Isometry3d pose = sp::forward_kinematics(cell, qs);
+      head.compare_pulse(qs, pose);
+      fired.push_back({first + k, pose});
+    }
+  };
+  sweep_axis.arm_position_compare(start + first * pitch, pitch, rows);
+  take_up_to(sweep_axis.position_compare_fired());
+  positioner.begin_move("sweep", end, speed);
+  const auto deadline = Clock::now() + timeout;
+  while (true) {
+    const auto why = static_cast<StopRequest>(stop.load());
+    if (why != StopRequest::none) {
+      sweep_axis.halt();
+      throw Interrupted(why, "during a sweep (its partial scan is discarded)");
+    }
+    const dr::AxisState st = sweep_axis.state();
+    if (st.faulted) break;  // finish_move reports the drive's fault
+    take_up_to(sweep_axis.position_compare_fired());
+    if ((!st.moving && st.in_position) || Clock::now() > deadline) break;
+    std::this_thread::sleep_for(std::chrono::microseconds(200));
+  }
+  sweep_axis.finish_move(end, std::chrono::milliseconds(std::max<long>(100, std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count())));
+  take_up_to(sweep_axis.position_compare_fired());
+  return fired;
+}
+
 /// Reads the profiles answering `fired` into `img` (object frame from each pulse's pose, view frame from the
 /// image's nominal pose); returns how many arrived. Profiles are matched to rows by their pulse number, not
 /// by arrival: profile base + k answers the k-th pulse of this pass. A late profile of an earlier pass is
@@ -158,7 +197,12 @@ Acquisition acquire_view(dr::Positioner& positioner, ScanHead& head, const sp::C
   const auto sweep_timeout = std::chrono::milliseconds(static_cast<long>(2000.0 * L / speed)) + settings.move_timeout;
   if (phase) phase("scanning");
   const std::vector<std::uint8_t> all(static_cast<std::size_t>(n_rows), 1);
-  int delivered = collect_profiles(head, sweep_pass(positioner, head, cell, q, start, end, pitch, all, speed, sweep_timeout, settings, stop), n_cols, img);
+  collect_profiles(head,
+                   settings.drive_compare ? compare_pass(positioner, head, cell, q, start, 0, n_rows, end, pitch, speed, sweep_timeout, stop)
+                                          : sweep_pass(positioner, head, cell, q, start, end, pitch, all, speed, sweep_timeout, settings, stop),
+                   n_cols, img);
+  auto acquired = [&img] { return static_cast<int>(std::count(img.acquired_rows.begin(), img.acquired_rows.end(), 1)); };
+  int delivered = acquired();
 
   // 3. Fill sweeps: the rows the sweep passed without a profile are swept again, the sweep axis alone back to
   //    the first of them (the other axes stay: the camera's pose is the same positioning), firing only at them.
@@ -182,8 +226,14 @@ Acquisition acquire_view(dr::Positioner& positioner, ScanHead& head, const sp::C
     positioner.move({{cell.axes[sweep].name, from}}, settings.move_timeout);
     if (phase) phase("scanning");
     const auto timeout = std::chrono::milliseconds(static_cast<long>(2000.0 * (to - from) / fill_speed)) + settings.move_timeout;
-    const int got = collect_profiles(head, sweep_pass(positioner, head, cell, q, start, to, pitch, missing, fill_speed, timeout, settings, stop),
-                                     n_cols, img);
+    // With the drive's compare, every row of the span is taken again (acquired ones are replaced by profiles
+    // as good); the daemon's own compare fires at the missing rows only.
+    collect_profiles(
+        head,
+        settings.drive_compare ? compare_pass(positioner, head, cell, q, start, first, last - first + 1, to, pitch, fill_speed, timeout, stop)
+                               : sweep_pass(positioner, head, cell, q, start, to, pitch, missing, fill_speed, timeout, settings, stop),
+        n_cols, img);
+    const int got = acquired() - delivered;  // rows taken for the first time
     out.filled_profiles += got;
     delivered += got;
     out.fill_sweeps = fill;

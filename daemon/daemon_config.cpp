@@ -109,6 +109,10 @@ void read_scanner(DaemonConfig& c, scancell::Section s) {
   if (c.scanner_driver != "sim" && c.scanner_driver != "sim_gige" && c.scanner_driver != "genicam")
     s.fail(s.key_path("driver"), "must be sim, sim_gige or genicam, got '" + c.scanner_driver + "'");
   c.scanner_seed = s.get_or<std::uint64_t>("seed", 1);
+  const std::string source = s.get_or<std::string>("trigger_source", "daemon");
+  if (source != "daemon" && source != "drive_compare")
+    s.fail(s.key_path("trigger_source"), "must be daemon or drive_compare, got '" + source + "'");
+  c.jobs.drive_compare = source == "drive_compare";
   if (c.scanner_driver != "sim") read_genicam(c, s);
   if (c.scanner_driver == "genicam") {
     scancell::Section t = s.section("trigger");
@@ -209,6 +213,11 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
   c.models.spec = sp::load_spec(c.spec_file);
   c.models.settings = sp::load_planner_settings(c.planner_file);
   c.drivers = drivers::load_driver_setup(c.drivers_file);
+  if (const auto sweep_drive = c.drivers.axes.find("sweep");
+      c.jobs.drive_compare && sweep_drive != c.drivers.axes.end() && std::holds_alternative<drivers::CanOpenAxisConfig>(sweep_drive->second))
+    y.fail("scanner.trigger_source",
+           "drive_compare needs a sweep drive with a position-compare output (the Modbus map's registers 12-17); axes.sweep in " +
+               c.drivers_file.string() + " is canopen: use daemon");
   bool sweep = false;
   for (const auto& a : c.models.cell.axes) sweep = sweep || a.name == "sweep";
   if (!sweep) y.fail("cell", "cell '" + c.models.cell.name + "' has no 'sweep' axis; line-scan execution needs one");

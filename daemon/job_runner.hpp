@@ -72,6 +72,10 @@ struct JobSettings {
   std::chrono::milliseconds move_timeout{60000};   // one positioning move
   double scan_speed_mm_s = 0.0;                    // sweep speed; 0: the cell's scan_speed_mm_s
   std::chrono::microseconds trigger_width{0};      // scanner trigger pulse width
+  /// scanner.trigger_source: drive_compare — the sweep drive's position-compare output triggers the scanner
+  /// (armed before each sweep, start + k·pitch), and each profile's pose is its compare position; daemon —
+  /// the daemon polls the sweep axis and pulses the trigger line itself (software compare).
+  bool drive_compare = false;
   /// Passes after a view's sweep for the rows it left without a profile (daemon/acquire): 0 keeps the holes.
   int fill_sweeps = 2;
   /// cloud.ply: one sample per cube of this side (mm); 0 keeps every spec-compliant sample. The model is

@@ -95,6 +95,13 @@ class SimHead : public ScanHead {
   dr::Scanner& scanner() override { return *scanner_; }
   void moved() override { pose_.moved(); }
   void camera_at(const sp::JointVector& q, const Eigen::Isometry3d& modelled) override { pose_.camera_at(q, modelled); }
+  // The wire from the drive's compare output to the scanner's trigger input: the scanner measures at the
+  // compare position, whenever the daemon hears of the pulse.
+  void compare_pulse(const sp::JointVector& q, const Eigen::Isometry3d& modelled) override {
+    pose_.camera_at(q, modelled);
+    trigger_->set(true);
+    trigger_->set(false);
+  }
 
  private:
   SimPose pose_;

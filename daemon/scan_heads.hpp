@@ -28,6 +28,10 @@ class ScanHead {
   virtual drivers::DigitalOutput& trigger() = 0;
   virtual drivers::Scanner& scanner() = 0;
   virtual void camera_at(const planner::JointVector& /*q*/, const Eigen::Isometry3d& /*modelled camera_to_object*/) {}
+  /// A pulse of the sweep drive's position-compare output (scanner.trigger_source: drive_compare) at the
+  /// compare position `q` with the pose the cell model computes there. On a cell that output is wired to the
+  /// scanner's trigger input and has already triggered it: nothing to do. A simulated head is that wire.
+  virtual void compare_pulse(const planner::JointVector& /*q*/, const Eigen::Isometry3d& /*modelled camera_to_object*/) {}
   /// A positioning move has ended (the sweep of a scan is not one): a simulated positioner draws its next
   /// repeatability error here.
   virtual void moved() {}

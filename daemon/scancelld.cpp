@@ -93,6 +93,9 @@ int main(int argc, char** argv) {
   }
   if (cfg.allowed_dirs.empty())
     std::cerr << "scancelld: jobs.allowed_dirs is not set: clients may name any regular file this daemon can read\n";
+  std::cerr << "scancelld: scanner " << cfg.scanner_driver << ", profiles triggered by "
+            << (cfg.jobs.drive_compare ? "the sweep drive's position compare" : "the daemon (polled sweep position)")
+            << " (scanner.trigger_source)\n";
   try {
     scancell::daemon::Daemon d(std::move(cfg));
     return d.run();

@@ -61,6 +61,13 @@ class Axis {
   virtual void halt() = 0;  // quick stop
   virtual void reset_fault() = 0;
   virtual AxisState state() = 0;
+  /// Position compare (scanner.trigger_source: drive_compare): the drive's compare output, wired to the
+  /// scanner's trigger input, pulses once each time the axis reaches start + k·pitch (mm or rad),
+  /// k = 0 … count−1, in the direction of pitch's sign; standing on the first position fires it. Drives
+  /// without one refuse (DriverError refused, naming the setting to change).
+  virtual void arm_position_compare(double start, double pitch, int count);
+  /// Compare pulses fired since the last arm_position_compare.
+  virtual int position_compare_fired();
 };
 
 struct SoftLimits {

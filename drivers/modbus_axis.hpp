@@ -54,6 +54,9 @@ class ModbusAxis : public Axis {
   void halt() override;
   void reset_fault() override;
   AxisState state() override;
+  /// Registers 12-16 and command 8 (docs/modbus-register-map.md); the pitch goes out in 1/1000 counts.
+  void arm_position_compare(double start, double pitch, int count) override;
+  int position_compare_fired() override;
   /// The driver gave up on the drive (retries exhausted or a drive fault): only reset_fault() is accepted.
   bool faulted() const { return faulted_; }
 

@@ -13,9 +13,16 @@ constexpr int kVelocityHi = 6;      // int32 profile velocity in counts/s (write
 constexpr int kActualVelocityHi = 8;  // int32 actual velocity in counts/s (read)
 constexpr int kFaultCode = 10;      // read: FaultCode below
 constexpr int kHeartbeat = 11;      // read: increments every simulator/drive cycle (10 ms)
-constexpr int kCount = 12;
+// Position compare (docs/modbus-register-map.md): the drive pulses its compare output, wired to the
+// scanner's trigger input, each time the axis reaches start + k·pitch, k = 0 … count−1.
+constexpr int kCompareStartHi = 12;  // int32 first compare position in counts (write)
+constexpr int kComparePitchHi = 14;  // int32 pitch in 1/1000 counts, its sign the direction of travel (write)
+constexpr int kCompareCount = 16;    // compare positions (write; taken by kArmCompare; 0 disarms)
+constexpr int kCompareFired = 17;    // read: pulses fired since the last kArmCompare
+constexpr int kStateCount = 12;      // registers 0-11: what a state read takes
+constexpr int kCount = 18;
 
-enum Command : std::uint16_t { kNone = 0, kEnable = 1, kDisable = 2, kHome = 3, kMove = 4, kStop = 5, kHalt = 6, kResetFault = 7 };
+enum Command : std::uint16_t { kNone = 0, kEnable = 1, kDisable = 2, kHome = 3, kMove = 4, kStop = 5, kHalt = 6, kResetFault = 7, kArmCompare = 8 };
 
 enum Status : std::uint16_t {
   kEnabled = 1u << 0,

@@ -88,6 +88,22 @@ std::string ModbusDriveSim::serve_rtu() {
   return name;
 }
 
+void ModbusDriveSim::fire_compare() {
+  // The compare output pulses once for every compare position the axis has reached in the direction of the
+  // pitch, however many one cycle passes (a drive compares in hardware, far faster than its bus cycle).
+  while (compare_fired_ < compare_count_) {
+    const double at = compare_start_ + compare_fired_ * compare_pitch_;
+    if (compare_pitch_ > 0.0 ? pos_ < at - 0.5 : pos_ > at + 0.5) break;
+    ++compare_fired_;
+  }
+  map_of(mapping_)->tab_registers[mm::kCompareFired] = static_cast<std::uint16_t>(compare_fired_);
+}
+
+int ModbusDriveSim::compare_fired() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return compare_fired_;
+}
+
 void ModbusDriveSim::step(double dt) {
   std::lock_guard<std::mutex> lock(mu_);
   ++heartbeat_;
@@ -118,6 +134,7 @@ void ModbusDriveSim::step(double dt) {
       pos_ += dir * stepc;
     }
   }
+  fire_compare();
   auto* regs = map_of(mapping_)->tab_registers;
   std::uint16_t st = 0;
   if (enabled_) st |= mm::kEnabled;
@@ -140,7 +157,10 @@ unsigned ModbusDriveSim::refuse_write(void* ctxv, const std::uint8_t* req, int l
   if (function != 0x06 && function != 0x10) return 0;
   const int addr = (req[off + 1] << 8) | req[off + 2];
   const int count = function == 0x06 ? 1 : ((req[off + 3] << 8) | req[off + 4]);
-  auto writable = [](int a) { return a == mm::kCommand || a == mm::kTargetHi || a == mm::kTargetHi + 1 || a == mm::kVelocityHi || a == mm::kVelocityHi + 1; };
+  auto writable = [](int a) {
+    return a == mm::kCommand || a == mm::kTargetHi || a == mm::kTargetHi + 1 || a == mm::kVelocityHi || a == mm::kVelocityHi + 1 ||
+           (a >= mm::kCompareStartHi && a <= mm::kCompareCount);
+  };
   for (int a = addr; a < addr + count; ++a)
     if (a >= mm::kCount || !writable(a)) return MODBUS_EXCEPTION_ILLEGAL_DATA_ADDRESS;
   // A write of the velocity's high word (function 16, both words) with the sign bit set: negative.
@@ -239,6 +259,15 @@ bool ModbusDriveSim::execute(std::uint16_t cmd, std::int32_t target, ModbusFault
       stalled_ = false;
       break;
     case mm::kResetFault: fault_bit_ = false; fault_code_ = mm::kNoFault; break;
+    case mm::kArmCompare: {
+      const auto* regs = map_of(mapping_)->tab_registers;
+      compare_start_ = mm::get_i32(regs, mm::kCompareStartHi);
+      compare_pitch_ = mm::get_i32(regs, mm::kComparePitchHi) / 1000.0;
+      compare_count_ = compare_pitch_ != 0.0 ? regs[mm::kCompareCount] : 0;
+      compare_fired_ = 0;
+      fire_compare();  // standing on the first position fires it
+      break;
+    }
     default: break;
   }
   return keep;

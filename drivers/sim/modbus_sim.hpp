@@ -58,6 +58,8 @@ class ModbusDriveSim {
   /// Writes refused as a drive would: to a read-only register, or a negative profile velocity.
   int refused_writes() const { return refused_writes_; }
   std::int32_t actual_counts() const;
+  /// Position-compare pulses fired since the last arming (register 17).
+  int compare_fired() const;
 
  private:
   void run_tcp(int listen_fd);
@@ -71,6 +73,7 @@ class ModbusDriveSim {
   /// The Modbus exception code a drive answers this write with, or 0 to accept it.
   unsigned refuse_write(void* ctx, const std::uint8_t* req, int len) const;
   void step(double dt);
+  void fire_compare();  // under mu_
 
   DriveParams p_;
   int unit_;
@@ -90,6 +93,8 @@ class ModbusDriveSim {
   bool enabled_ = false, homed_ = false, moving_ = false, fault_bit_ = false, stalled_ = false;
   double homing_left_ = 0.0;
   std::uint16_t fault_code_ = 0, heartbeat_ = 0;
+  double compare_start_ = 0.0, compare_pitch_ = 0.0;  // counts
+  int compare_count_ = 0, compare_fired_ = 0;
   std::vector<LoggedCommand> log_;
   std::size_t violations_ = 0;
 };

@@ -30,6 +30,16 @@ out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
 write_config "{driver: sim_gige, profiles_per_frame: 4096}" "$JOBS}"
 out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
 [ $rc = 4 ] && echo "$out" | grep -q "scanner.profiles_per_frame" || fail "profiles_per_frame out of range: exit $rc: $out"
+# What triggers the scanner: the daemon or the sweep drive's position compare, and only a drive that has one.
+write_config "{driver: sim, trigger_source: encoder}" "$JOBS}"
+out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
+[ $rc = 4 ] && echo "$out" | grep -q "scanner.trigger_source: must be daemon or drive_compare, got 'encoder'" || fail "bad trigger_source: exit $rc: $out"
+cp "$W/drivers.yaml" "$W/drivers-modbus.yaml"
+sed -i 's|^  sweep: .*|  sweep: {driver: canopen, interface: can0, node_id: 9, counts_per_mm: 1000, profile_velocity_mm_s: 100}|' "$W/drivers.yaml"
+write_config "{driver: sim, trigger_source: drive_compare}" "$JOBS}"
+out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
+[ $rc = 4 ] && echo "$out" | grep -q "scanner.trigger_source: drive_compare needs a sweep drive with a position-compare output.*axes.sweep in .* is canopen: use daemon" || fail "drive_compare on canopen: exit $rc: $out"
+mv "$W/drivers-modbus.yaml" "$W/drivers.yaml"
 write_config "{driver: sim}" "$JOBS, fill_sweeps: 9}"
 out=$("$BUILD/daemon/scancelld" --config "$W/scancelld.yaml" 2>&1); rc=$?
 [ $rc = 4 ] && echo "$out" | grep -q "jobs.fill_sweeps: must be in \[0, 5\]" || fail "fill_sweeps out of range: exit $rc: $out"

@@ -220,6 +220,12 @@ struct LossyHead : ScanHead, drivers::Scanner {
     fired_row.push_back(static_cast<int>(std::floor((q[sweep] - start_mm + 5e-4) / pitch_mm)));
     inner->camera_at(q, m);
   }
+  void compare_pulse(const sp::JointVector& q, const Eigen::Isometry3d& m) override {
+    fired_row.push_back(static_cast<int>(std::floor((q[sweep] - start_mm + 5e-4) / pitch_mm)));
+    compare_at.push_back(q[sweep]);
+    inner->compare_pulse(q, m);
+  }
+  std::vector<double> compare_at;  // per compare pulse: the sweep position it came at
   void moved() override { inner->moved(); }
   std::set<int> swallow_rows;  // the first profile fired at these never comes at all (the sweep's last frame lost)
   std::set<int> swallowed;
@@ -296,6 +302,54 @@ TEST_F(SimCell, FillSweepsTakeTheProfilesASweepMissedAndOnlyThose) {
   EXPECT_GE(kept.lost_profiles, 10);
   for (const int j : {40, 41, 42, 43, 44, 100, 252, 253, 254, 255}) EXPECT_FALSE(kept.image.acquired_rows[static_cast<std::size_t>(j)]) << "row " << j;
   EXPECT_LE(kept_pulses, 256u);
+}
+
+// scanner.trigger_source: drive_compare. The sweep drive's position compare (the simulated Modbus drive's
+// registers 12-17) triggers every row at start + r·pitch, and each profile's pose is its compare position:
+// rows land on their row-index line to within the scanner's own noise, where the daemon's polled compare
+// puts them up to a pitch beyond. Lost profiles are retaken by a compare over their span.
+TEST_F(SimCell, TheDrivesPositionCompareTriggersEveryRowAtItsPosition) {
+  sp::TriangleMesh cube = sp::load_mesh(write_cube(dir));
+  for (auto& v : cube.vertices) v -= Eigen::Vector3d(25, 25, 0);
+  const double L = 60.0, pitch = L / 255.0;
+  const sp::IkResult ik = sp::look_at(models.cell, Eigen::Vector3d(25, 0, 25), 160.0, 0.0, 0.0, L);
+  ASSERT_TRUE(ik.ok) << ik.why;
+  LossyHead head;
+  head.inner = make_sim_head(models.sensor, cube, cube.triangles.size(), 7, &models.cell, nullptr);
+  head.lose_rows = {40, 41, 42, 43, 44, 100};
+  head.sweep = models.cell.axis_index("sweep");
+  head.start_mm = ik.q[head.sweep] - 0.5 * L;
+  head.pitch_mm = pitch;
+  JobSettings s;
+  s.scan_speed_mm_s = scan_speed;
+  s.drive_compare = true;
+  std::atomic<int> stop{0};
+  const Acquisition a = acquire_view(io->positioner, head, models.cell, models.sensor, ik.q, L, s, stop);
+  EXPECT_EQ(a.lost_profiles, 0);
+  EXPECT_EQ(a.fill_sweeps, 1);
+  EXPECT_EQ(a.filled_profiles, 6);
+  // The sweep's 256 pulses, then the fill's compare over rows 40 … 100 (61), each at its compare position.
+  ASSERT_EQ(head.compare_at.size(), 256u + 61u);
+  EXPECT_EQ(head.pulses, 256u + 61u);
+  for (std::size_t k = 0; k < head.compare_at.size(); ++k) {
+    const int row = k < 256 ? static_cast<int>(k) : 40 + static_cast<int>(k - 256);
+    EXPECT_NEAR(head.compare_at[k], head.start_mm + row * pitch, 1e-9) << "pulse " << k;
+  }
+  const sp::RangeImage& img = a.image;
+  int checked = 0;
+  double worst = 0.0;
+  for (int j = 0; j < img.rows; ++j) {
+    double y = 0;
+    int n = 0;
+    for (int i = 0; i < img.columns; ++i)
+      if (img.at(i, j).valid()) y += img.at(i, j).camera_mm.y(), ++n;
+    if (n < 50) continue;  // past the cube's edge
+    worst = std::max(worst, std::abs(y / n - (-0.5 * L + j * pitch)));
+    ++checked;
+  }
+  EXPECT_GT(checked, 150);
+  // Measured 0.004 mm (pitch 0.235 mm): the scanner's own noise along the sweep.
+  EXPECT_LT(worst, 0.1 * pitch) << "the farthest row's mean y from its compare position (mm)";
 }
 
 TEST_F(SimCell, CubeJobMeasuresEverythingTheCellCanMeasure) {

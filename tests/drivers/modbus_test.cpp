@@ -418,3 +418,34 @@ TEST(Modbus, MbpollReadsTheDocumentedMap) {
   EXPECT_THAT(out, HasSubstr("[4]: \t0xFFFF")) << out;
   EXPECT_THAT(out, HasSubstr("[5]: \t0xE2B4")) << out;
 }
+
+TEST(Modbus, PositionComparePulsesAtEveryPositionTheAxisReaches) {
+  // 1000 counts/mm; compare from 1 mm every 0.0837 mm (83.7 counts), 60 positions: the last at
+  // 1 + 59 · 0.0837 = 5.9383 mm (5938.3 counts).
+  sim::ModbusDriveSim drive;
+  dr::ModbusAxis axis(tcp_config(drive.serve_tcp()));
+  axis.enable();
+  axis.home(2000ms);
+  axis.move_to(1.0, 3000ms);
+  axis.arm_position_compare(1.0, 0.0837, 60);
+  EXPECT_EQ(axis.position_compare_fired(), 1);  // standing on the first position fires it
+  // To 5.940 mm: every position (at whole counts the pitch would be 84 and the last at 5956: 59).
+  axis.move_to(5.940, 3000ms);
+  EXPECT_EQ(axis.position_compare_fired(), 60);
+  EXPECT_EQ(drive.compare_fired(), 60);
+  // Re-armed backwards from 5.9 mm every 0.25 mm, 20 positions; the move to 3.0 mm reaches 5.9 … 3.15:
+  // ⌊(5.9 − 3.0)/0.25⌋ + 1 = 12.
+  axis.arm_position_compare(5.9, -0.25, 20);
+  EXPECT_EQ(axis.position_compare_fired(), 0);
+  axis.move_to(3.0, 3000ms);
+  EXPECT_EQ(axis.position_compare_fired(), 12);
+  // A zero pitch or no positions is refused before anything is sent, naming the registers.
+  try {
+    axis.arm_position_compare(1.0, 0.0, 5);
+    ADD_FAILURE() << "accepted a zero pitch";
+  } catch (const dr::DriverError& e) {
+    EXPECT_EQ(e.kind, dr::DriverError::Kind::refused);
+    EXPECT_THAT(e.what(), HasSubstr("registers 12-16 (position compare)"));
+  }
+  EXPECT_EQ(count_of(drive.commands(), dr::modbus_map::kArmCompare), 2u);
+}
