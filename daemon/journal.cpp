@@ -173,11 +173,14 @@ bool transition_allowed(JobState from, JobState to) {
   return false;
 }
 
-Journal::Journal(const std::filesystem::path& dir) : dir_(dir) {
+Journal::Journal(const std::filesystem::path& dir, Open mode) : dir_(dir) {
   std::filesystem::create_directories(dir_ / "scans");
-  // A crash between writing a temp file and renaming it leaves it behind; it is referenced by nothing.
-  for (const auto& e : std::filesystem::directory_iterator(dir_ / "scans"))
-    if (e.path().extension() == ".tmp") std::filesystem::remove(e.path());
+  // A crash between writing a temp file and renaming it leaves it behind; it is referenced by nothing. Only
+  // the owner removes them: `scancelld --check` beside a running daemon removed the scan it was writing, and
+  // the job faulted renaming it (daemon_cli, 2026-11-29).
+  if (mode == Open::own)
+    for (const auto& e : std::filesystem::directory_iterator(dir_ / "scans"))
+      if (e.path().extension() == ".tmp") std::filesystem::remove(e.path());
   const std::string file = (dir_ / "journal.sqlite").string();
   if (sqlite3_open(file.c_str(), &db_) != SQLITE_OK) {
     const std::string msg = db_ ? sqlite3_errmsg(db_) : "out of memory";

@@ -75,8 +75,12 @@ struct JournalError : std::runtime_error {
 
 class Journal {
  public:
-  /// Opens (or creates) `dir`/journal.sqlite and `dir`/scans/; removes temp files a crash left behind.
-  explicit Journal(const std::filesystem::path& dir);
+  /// How a journal is opened: by its owner (the daemon holding the data directory's lock), which removes the
+  /// temp files a crash left behind; or to inspect it (`scancelld --check`, beside a running daemon), which
+  /// leaves every file alone: a temp file may be a scan the daemon is writing right now.
+  enum class Open { own, inspect };
+  /// Opens (or creates) `dir`/journal.sqlite and `dir`/scans/.
+  explicit Journal(const std::filesystem::path& dir, Open mode = Open::own);
   ~Journal();
   Journal(const Journal&) = delete;
   Journal& operator=(const Journal&) = delete;

@@ -22,7 +22,7 @@ namespace {
 /// "view K/N stored" events of a round must each appear at most once.
 int check_journal(const std::string& dir) {
   using nlohmann::json;
-  scancell::daemon::Journal journal(dir);
+  scancell::daemon::Journal journal(dir, scancell::daemon::Journal::Open::inspect);
   json out = {{"problems", journal.check()}, {"jobs", json::array()}};
   for (const auto& j : journal.jobs(1000000)) {
     std::size_t scans = 0;

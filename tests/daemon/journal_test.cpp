@@ -150,3 +150,18 @@ TEST(Journal, SurvivesKillNineAtAnyMoment) {
   EXPECT_FALSE(j.first_unfinished_view(plans.back()).has_value());
   fs::remove_all(dir);
 }
+
+// `scancelld --check` opens the journal beside a running daemon: a temp file there may be the scan the daemon
+// is writing, and removing it faulted the job at its rename (daemon_cli, 2026-11-29). Only the owner clears
+// what a crash left behind.
+TEST(Journal, InspectingLeavesAScanBeingWrittenAlone) {
+  const fs::path dir = fresh_dir("inspect");
+  { dm::Journal own(dir); }
+  const fs::path tmp = dir / "scans" / "p1-v2.bin.tmp";
+  std::ofstream(tmp) << "half a scan";
+  { dm::Journal inspect(dir, dm::Journal::Open::inspect); }
+  EXPECT_TRUE(fs::exists(tmp));
+  { dm::Journal own(dir); }
+  EXPECT_FALSE(fs::exists(tmp));
+  fs::remove_all(dir);
+}
