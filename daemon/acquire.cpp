@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <map>
 #include <thread>
 
@@ -21,6 +22,30 @@ struct Fired {
   int row;
   Eigen::Isometry3d pose;
 };
+
+/// The sweep axis' move to `end` at `speed`, read every `every` until in position, a drive fault, the deadline
+/// or a stop request (the axis halted, Interrupted thrown); `poll` sees every state read, and one more after
+/// finish_move (which reports a fault, or times out with a halt).
+void sweep_move(dr::Positioner& positioner, double end, double speed, std::chrono::milliseconds timeout, const std::atomic<int>& stop,
+                std::chrono::microseconds every, const std::function<void(const dr::AxisState&)>& poll) {
+  dr::Axis& sweep_axis = positioner.axis("sweep");
+  positioner.begin_move("sweep", end, speed);
+  const auto deadline = Clock::now() + timeout;
+  while (true) {
+    const auto why = static_cast<StopRequest>(stop.load());
+    if (why != StopRequest::none) {
+      sweep_axis.halt();
+      throw Interrupted(why, "during a sweep (its partial scan is discarded)");
+    }
+    const dr::AxisState st = sweep_axis.state();
+    if (st.faulted) break;  // finish_move reports the drive's fault
+    poll(st);
+    if ((!st.moving && st.in_position) || Clock::now() > deadline) break;  // finish_move times out with a halt
+    std::this_thread::sleep_for(every);
+  }
+  sweep_axis.finish_move(end, std::chrono::milliseconds(std::max<long>(100, std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count())));
+  poll(sweep_axis.state());
+}
 
 /// One pass of the sweep from where the sweep axis stands to `end` at `speed`, firing one pulse each time it
 /// passes the position of a row `wanted` marks (row r at `start` + r `pitch`) (software position compare, as a drive's
@@ -51,23 +76,7 @@ std::vector<Fired> sweep_pass(dr::Positioner& positioner, ScanHead& head, const 
     fired.push_back({row, pose});
   };
   fire_up_to(sweep_axis.state().position);
-  positioner.begin_move("sweep", end, speed);
-  const auto deadline = Clock::now() + timeout;
-  while (true) {
-    const auto why = static_cast<StopRequest>(stop.load());
-    if (why != StopRequest::none) {
-      sweep_axis.halt();
-      throw Interrupted(why, "during a sweep (its partial scan is discarded)");
-    }
-    const dr::AxisState st = sweep_axis.state();
-    if (st.faulted) break;  // finish_move reports the drive's fault
-    fire_up_to(st.position);
-    if (!st.moving && st.in_position) break;
-    if (Clock::now() > deadline) break;  // finish_move times out with a halt
-    std::this_thread::sleep_for(std::chrono::microseconds(50));
-  }
-  sweep_axis.finish_move(end, std::chrono::milliseconds(std::max<long>(100, std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count())));
-  fire_up_to(sweep_axis.state().position);
+  sweep_move(positioner, end, speed, timeout, stop, std::chrono::microseconds(50), [&](const dr::AxisState& st) { fire_up_to(st.position); });
   return fired;
 }
 
@@ -91,22 +100,8 @@ std::vector<Fired> compare_pass(dr::Positioner& positioner, ScanHead& head, cons
   };
   sweep_axis.arm_position_compare(start + first * pitch, pitch, rows);
   take_up_to(sweep_axis.position_compare_fired());
-  positioner.begin_move("sweep", end, speed);
-  const auto deadline = Clock::now() + timeout;
-  while (true) {
-    const auto why = static_cast<StopRequest>(stop.load());
-    if (why != StopRequest::none) {
-      sweep_axis.halt();
-      throw Interrupted(why, "during a sweep (its partial scan is discarded)");
-    }
-    const dr::AxisState st = sweep_axis.state();
-    if (st.faulted) break;  // finish_move reports the drive's fault
-    take_up_to(sweep_axis.position_compare_fired());
-    if ((!st.moving && st.in_position) || Clock::now() > deadline) break;
-    std::this_thread::sleep_for(std::chrono::microseconds(200));
-  }
-  sweep_axis.finish_move(end, std::chrono::milliseconds(std::max<long>(100, std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count())));
-  take_up_to(sweep_axis.position_compare_fired());
+  sweep_move(positioner, end, speed, timeout, stop, std::chrono::microseconds(200),
+             [&](const dr::AxisState&) { take_up_to(sweep_axis.position_compare_fired()); });
   return fired;
 }
 

@@ -120,6 +120,9 @@ void read_scanner(DaemonConfig& c, scancell::Section s) {
     c.trigger_offset = static_cast<unsigned>(t.ranged<int>("offset", 0, 0, 1023));
     t.finish();
   }
+  if (c.scanner_driver == "genicam" && c.trigger_chip == "sim" && !c.jobs.drive_compare)
+    s.fail(s.key_path("trigger") + ".chip", "sim is no line a real scanner can see: give the GPIO chip of its trigger input, or set "
+                                            "scanner.trigger_source: drive_compare (the sweep drive's compare output triggers it)");
   if (c.scanner_driver == "genicam" && s.has("truth"))
     s.fail(s.key_path("truth"), "a simulated cell's truth with a real scanner (driver genicam)");
   if (s.has("truth")) c.truth = read_truth(c, s.section("truth"));
@@ -216,7 +219,7 @@ DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_di
   if (const auto sweep_drive = c.drivers.axes.find("sweep");
       c.jobs.drive_compare && sweep_drive != c.drivers.axes.end() && std::holds_alternative<drivers::CanOpenAxisConfig>(sweep_drive->second))
     y.fail("scanner.trigger_source",
-           "drive_compare needs a sweep drive with a position-compare output (the Modbus map's registers 12-17); axes.sweep in " +
+           "drive_compare needs a sweep drive with a position-compare output (the Modbus map's registers 12-19); axes.sweep in " +
                c.drivers_file.string() + " is canopen: use daemon");
   bool sweep = false;
   for (const auto& a : c.models.cell.axes) sweep = sweep || a.name == "sweep";

@@ -115,13 +115,17 @@ class SimHead : public ScanHead {
 
 class GenicamHead : public ScanHead {
  public:
+  // `chip` sim: no line at all (scanner.trigger_source drive_compare, where the drive's compare output is
+  // what triggers the scanner; the loader refuses it otherwise).
   GenicamHead(const sp::SensorModel& sensor, const dr::GenicamConfig& config, const std::string& chip, unsigned offset)
-      : trigger_(chip, offset, false), scanner_(sensor, config) {}
-  dr::DigitalOutput& trigger() override { return trigger_; }
+      : trigger_(chip == "sim" ? std::unique_ptr<dr::DigitalOutput>(std::make_unique<dr::SimOutput>())
+                               : std::make_unique<dr::GpiodOutput>(chip, offset, false)),
+        scanner_(sensor, config) {}
+  dr::DigitalOutput& trigger() override { return *trigger_; }
   dr::Scanner& scanner() override { return scanner_; }
 
  private:
-  dr::GpiodOutput trigger_;
+  std::unique_ptr<dr::DigitalOutput> trigger_;
   dr::GenicamScanner scanner_;
 };
 

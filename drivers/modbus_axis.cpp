@@ -234,6 +234,18 @@ int ModbusAxis::position_compare_fired() {
   return r;
 }
 
+ModbusAxis::CompareState ModbusAxis::position_compare() {
+  std::uint16_t r[8] = {};
+  read(mm::kCompareStartHi, 8, r, "position compare");
+  CompareState c;
+  c.start = mm::get_i32(r, 0) / cfg_.counts_per_unit;
+  c.pitch = mm::get_i32(r, 2) / (1000.0 * cfg_.counts_per_unit);
+  c.count = r[4];
+  c.fired = r[5];
+  c.total = static_cast<std::uint32_t>(mm::get_i32(r, 6));
+  return c;
+}
+
 AxisState ModbusAxis::state() {
   std::uint16_t r[mm::kStateCount] = {};
   read(0, mm::kStateCount, r, "state");

@@ -57,6 +57,14 @@ class ModbusAxis : public Axis {
   /// Registers 12-16 and command 8 (docs/modbus-register-map.md); the pitch goes out in 1/1000 counts.
   void arm_position_compare(double start, double pitch, int count) override;
   int position_compare_fired() override;
+  /// What the compare is armed with and has fired (registers 12-19 in one read; start and pitch in mm or
+  /// rad): a simulated scanner on the compare output's wire reads it to know where each pulse came.
+  struct CompareState {
+    double start = 0.0, pitch = 0.0;
+    int count = 0, fired = 0;
+    std::uint32_t total = 0;  // pulses since the drive's power-up
+  };
+  CompareState position_compare();
   /// The driver gave up on the drive (retries exhausted or a drive fault): only reset_fault() is accepted.
   bool faulted() const { return faulted_; }
 

@@ -19,8 +19,10 @@ constexpr int kCompareStartHi = 12;  // int32 first compare position in counts (
 constexpr int kComparePitchHi = 14;  // int32 pitch in 1/1000 counts, its sign the direction of travel (write)
 constexpr int kCompareCount = 16;    // compare positions (write; taken by kArmCompare; 0 disarms)
 constexpr int kCompareFired = 17;    // read: pulses fired since the last kArmCompare
+constexpr int kCompareTotalHi = 18;  // read: uint32 pulses fired since power-up (a listener on the output's wire
+                                     // that polls cannot lose the last pulses of one arming to the next)
 constexpr int kStateCount = 12;      // registers 0-11: what a state read takes
-constexpr int kCount = 18;
+constexpr int kCount = 20;
 
 enum Command : std::uint16_t { kNone = 0, kEnable = 1, kDisable = 2, kHome = 3, kMove = 4, kStop = 5, kHalt = 6, kResetFault = 7, kArmCompare = 8 };
 

@@ -2,6 +2,8 @@
 //   scancell-sim modbus (--tcp PORT [--drives N] | --rtu) [--fault F] [--max-velocity COUNTS_S] [--accel COUNTS_S2]
 //                       [--no-stdin]
 //   scancell-sim can --unix PATH [--node N]
+//   scancell-sim scanner --gige ADDRESS --mesh FILE --cell FILE --sensor FILE --drivers FILE [--fit-mm N] ...
+//                       (tools/sim_scanner.cpp: a GigE Vision scanner triggered by the sweep drive's compare)
 // Serves simulated Modbus drives (docs/modbus-register-map.md): N of them on 127.0.0.1:PORT ... PORT+N-1 (one
 // per port, as a cell's drives each have their own address), or one on a new pseudo-terminal with --rtu (its
 // path is printed). Faults can be chosen at start (--fault, every drive) or at run time by writing "FAULT" (drive
@@ -31,6 +33,7 @@
 
 #include "drivers/sim/cia402_sim.hpp"
 #include "drivers/sim/modbus_sim.hpp"
+#include "tools/sim_scanner.hpp"
 
 namespace sim = scancell::drivers::sim;
 
@@ -63,6 +66,8 @@ const std::map<std::string, sim::CanFault> kCanFaults = {
 
 int usage() {
   std::cerr << "usage: scancell-sim can --unix PATH [--node N]\n";
+  std::cerr << "usage: scancell-sim scanner --gige ADDRESS --mesh FILE --cell FILE --sensor FILE --drivers FILE [--fit-mm N] "
+               "[--serial S] [--seed N]\n";
   std::cerr << "usage: scancell-sim modbus (--tcp PORT [--drives N] | --rtu) [--fault F] [--max-velocity COUNTS_S] "
                "[--accel COUNTS_S2] [--no-stdin]\n  faults:";
   for (const auto& [n, f] : kFaults) std::cerr << ' ' << n;
@@ -254,5 +259,10 @@ int serve_modbus(int argc, char** argv) {
 int main(int argc, char** argv) {
   if (argc >= 2 && std::strcmp(argv[1], "can") == 0) return serve_can(argc, argv);
   if (argc >= 2 && std::strcmp(argv[1], "modbus") == 0) return serve_modbus(argc, argv);
+  if (argc >= 2 && std::strcmp(argv[1], "scanner") == 0) {
+    std::signal(SIGINT, on_signal);
+    std::signal(SIGTERM, on_signal);
+    return scancell::tools::serve_scanner(argc, argv, g_stop);
+  }
   return usage();
 }

@@ -1,4 +1,5 @@
 #include "drivers/sim/modbus_sim.hpp"
+#include <algorithm>
 
 #include <cerrno>
 #include <chrono>
@@ -95,8 +96,11 @@ void ModbusDriveSim::fire_compare() {
     const double at = compare_start_ + compare_fired_ * compare_pitch_;
     if (compare_pitch_ > 0.0 ? pos_ < at - 0.5 : pos_ > at + 0.5) break;
     ++compare_fired_;
+    ++compare_total_;
   }
-  map_of(mapping_)->tab_registers[mm::kCompareFired] = static_cast<std::uint16_t>(compare_fired_);
+  auto* regs = map_of(mapping_)->tab_registers;
+  regs[mm::kCompareFired] = static_cast<std::uint16_t>(compare_fired_);
+  mm::put_i32(regs, mm::kCompareTotalHi, static_cast<std::int32_t>(compare_total_));
 }
 
 int ModbusDriveSim::compare_fired() const {
@@ -297,52 +301,44 @@ bool ModbusDriveSim::handle(void* ctxv, const std::uint8_t* req, int len) {
 }
 
 void ModbusDriveSim::run_tcp(int listen_fd) {
+  // Several clients at once, as a drive's Modbus TCP server takes them (the daemon, and a simulated scanner
+  // reading the compare counter its compare output would pulse), each request answered in turn.
   auto* ctx = static_cast<modbus_t*>(server_ctx_);
   std::uint8_t req[MODBUS_TCP_MAX_ADU_LENGTH];
   auto last = Clock::now();
-  int client = -1;
+  std::vector<int> clients;
+  auto drop = [&](int c) {
+    ::close(c);
+    clients.erase(std::remove(clients.begin(), clients.end(), c), clients.end());
+  };
   while (running_) {
     fd_set set;
     FD_ZERO(&set);
     FD_SET(listen_fd, &set);
     int maxfd = listen_fd;
-    if (client >= 0) FD_SET(client, &set), maxfd = std::max(maxfd, client);
+    for (int c : clients) FD_SET(c, &set), maxfd = std::max(maxfd, c);
     timeval tv{0, 2000};
     const int n = ::select(maxfd + 1, &set, nullptr, nullptr, &tv);
     const auto now = Clock::now();
     step(std::chrono::duration<double>(now - last).count());
     last = now;
     const bool dropping = fault_ == ModbusFault::accept_and_close;
-    if (dropping && client >= 0) {
-      ::close(client);
-      client = -1;
-    }
+    if (dropping)
+      while (!clients.empty()) drop(clients.back());
     if (n <= 0) continue;
     if (FD_ISSET(listen_fd, &set)) {
       const int c = ::accept(listen_fd, nullptr, nullptr);
-      if (c >= 0 && dropping) {
-        ::close(c);
-      } else if (c >= 0) {
-        if (client >= 0) ::close(client);
-        client = c;
-      }
-      continue;
+      if (c >= 0 && (dropping || clients.size() >= 8)) ::close(c);
+      else if (c >= 0) clients.push_back(c);
     }
-    if (client >= 0 && FD_ISSET(client, &set)) {
-      modbus_set_socket(ctx, client);
+    for (const int c : std::vector<int>(clients)) {
+      if (!FD_ISSET(c, &set)) continue;
+      modbus_set_socket(ctx, c);
       const int len = modbus_receive(ctx, req);
-      if (len <= 0) {
-        ::close(client);
-        client = -1;
-        continue;
-      }
-      if (!handle(ctx, req, len)) {
-        ::close(client);
-        client = -1;
-      }
+      if (len <= 0 || !handle(ctx, req, len)) drop(c);
     }
   }
-  if (client >= 0) ::close(client);
+  for (const int c : clients) ::close(c);
   modbus_free(ctx);
   server_ctx_ = nullptr;
 }

@@ -95,6 +95,7 @@ class ModbusDriveSim {
   std::uint16_t fault_code_ = 0, heartbeat_ = 0;
   double compare_start_ = 0.0, compare_pitch_ = 0.0;  // counts
   int compare_count_ = 0, compare_fired_ = 0;
+  std::uint32_t compare_total_ = 0;
   std::vector<LoggedCommand> log_;
   std::size_t violations_ = 0;
 };

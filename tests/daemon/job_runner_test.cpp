@@ -305,7 +305,7 @@ TEST_F(SimCell, FillSweepsTakeTheProfilesASweepMissedAndOnlyThose) {
 }
 
 // scanner.trigger_source: drive_compare. The sweep drive's position compare (the simulated Modbus drive's
-// registers 12-17) triggers every row at start + r·pitch, and each profile's pose is its compare position:
+// registers 12-19) triggers every row at start + r·pitch, and each profile's pose is its compare position:
 // rows land on their row-index line to within the scanner's own noise, where the daemon's polled compare
 // puts them up to a pitch beyond. Lost profiles are retaken by a compare over their span.
 TEST_F(SimCell, TheDrivesPositionCompareTriggersEveryRowAtItsPosition) {

@@ -439,6 +439,13 @@ TEST(Modbus, PositionComparePulsesAtEveryPositionTheAxisReaches) {
   EXPECT_EQ(axis.position_compare_fired(), 0);
   axis.move_to(3.0, 3000ms);
   EXPECT_EQ(axis.position_compare_fired(), 12);
+  // What a listener on the output's wire reads (registers 12-19): the arming, and 60 + 12 pulses in all.
+  const auto c = axis.position_compare();
+  EXPECT_DOUBLE_EQ(c.start, 5.9);
+  EXPECT_DOUBLE_EQ(c.pitch, -0.25);
+  EXPECT_EQ(c.count, 20);
+  EXPECT_EQ(c.fired, 12);
+  EXPECT_EQ(c.total, 72u);
   // A zero pitch or no positions is refused before anything is sent, naming the registers.
   try {
     axis.arm_position_compare(1.0, 0.0, 5);
