@@ -401,19 +401,16 @@ void record_views_by_samples(ViewPlan& p, const SampleCover& c, const RowFootpri
       p.predicted_rows.push_back(r);
       p.predicted_gain_mm2 += p.rough.area_mm2[r];
     }
-  std::vector<std::uint8_t> sample_seen(c.owner.size(), 0);
-  for (const auto& col : c.matrix.columns)
-    col.for_each([&](std::uint32_t r) {
-      if (r >= c.n_rows) sample_seen[r - c.n_rows] = 1;
-    });
-  std::vector<std::uint32_t> unmeasurable;
-  for (auto r : p.cover.unmeasurable_rows)
-    if (r < c.n_rows) unmeasurable.push_back(r);
+  // The cover lists the rows of its own matrix that no column holds: every footprint row (its samples stand
+  // in for it) and the samples no candidate measures. A footprint row is unmeasurable when all of its are.
+  std::vector<std::uint32_t> unseen(f.size(), 0), unmeasurable;
+  for (auto r : p.cover.unmeasurable_rows) {
+    if (r >= c.n_rows) ++unseen[c.owner[r - c.n_rows]];
+    else if (!std::binary_search(f.rows.begin(), f.rows.end(), r)) unmeasurable.push_back(r);
+  }
   for (std::size_t k = 0; k < f.size(); ++k)
-    if (std::none_of(sample_seen.begin() + f.first[k], sample_seen.begin() + f.first[k + 1], [](std::uint8_t b) { return b != 0; }))
-      unmeasurable.push_back(f.rows[k]);
+    if (unseen[k] == f.first[k + 1] - f.first[k]) unmeasurable.push_back(f.rows[k]);
   std::sort(unmeasurable.begin(), unmeasurable.end());
-  unmeasurable.erase(std::unique(unmeasurable.begin(), unmeasurable.end()), unmeasurable.end());
   p.cover.unmeasurable_rows = unmeasurable;
 }
 

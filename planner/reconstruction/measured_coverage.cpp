@@ -192,8 +192,8 @@ RowFootprints MeasuredCoverage::open_footprints(const std::vector<std::uint32_t>
   for (const auto r : sorted) {
     if (r >= this->rows()) throw DataError("open_footprints: row " + std::to_string(r) + " past the " + std::to_string(this->rows()) + " rows");
     const std::size_t cells = footprint_[r].size();
+    if (measured(r)) continue;
     const auto need = static_cast<std::size_t>(std::ceil(options_.row_fraction * static_cast<double>(cells) - 1e-9));
-    if (filled_count_[r] >= need) continue;  // measured already
     std::vector<std::size_t> open;
     for (std::size_t c = 0; c < cells; ++c)
       if (!filled_[r][c]) open.push_back(c);

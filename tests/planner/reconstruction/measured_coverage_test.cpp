@@ -194,5 +194,39 @@ TEST(Replan, MeasuredRowsLeaveTheCover) {
   EXPECT_THROW(plan_views(patch, sensor, spec, settings, rough, 1, nullptr, &wrong), DataError);
 }
 
+// A replan by footprint samples (issue 15) on the same convex patch, its x >= 0 half open and not yet scanned:
+// the views finish the open rows (predicted rows are open ones, nearly all of their area), every open row
+// stays measurable (the rows give way to their samples in the cover, and a row is unmeasurable only when
+// none of its samples is), and the measured half is left alone.
+TEST(Replan, OpenRowsArePlannedByTheirFootprintSamples) {
+  const TriangleMesh patch = convex_patch(100.0, 0.04, 2.0);
+  const SensorModel sensor = thesis_sensor();
+  const ModelSpec spec = thesis_spec();
+  PlannerSettings settings;
+  RoughModelOptions rough;
+  rough.target_vertices = 400;
+  const ViewPlan first = plan_views(patch, sensor, spec, settings, rough, 1);
+  std::vector<std::uint8_t> half(first.rough.size(), 0);
+  std::vector<std::uint32_t> open;
+  double open_area = 0.0;
+  for (std::uint32_t r = 0; r < first.rough.size(); ++r) {
+    half[r] = first.rough.points[r].x() < 0.0;
+    if (!half[r]) open.push_back(r), open_area += first.rough.area_mm2[r];
+  }
+  const MeasuredCoverage cov(first.rough, spec);
+  const RowFootprints f = cov.open_footprints(open, 8);
+  ASSERT_EQ(f.size(), open.size());
+  const ViewPlan rest = plan_views(patch, sensor, spec, settings, rough, 1, nullptr, &half, nullptr, nullptr, &f);
+  ASSERT_FALSE(rest.views.empty());
+  double predicted = 0.0;
+  for (auto r : rest.predicted_rows) {
+    EXPECT_FALSE(half[r]) << "row " << r << " was measured";
+    predicted += first.rough.area_mm2[r];
+  }
+  EXPECT_NEAR(predicted, rest.predicted_gain_mm2, 1e-6);
+  EXPECT_GT(predicted, 0.9 * open_area);
+  for (auto r : rest.cover.unmeasurable_rows) EXPECT_TRUE(half[r]) << "open row " << r << " listed as unmeasurable";
+}
+
 }  // namespace
 }  // namespace scancell::planner
