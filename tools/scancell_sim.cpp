@@ -98,8 +98,6 @@ int serve_can(int argc, char** argv) {
     std::cerr << "scancell-sim: " << path << ": " << std::strerror(errno) << "\n";
     return 1;
   }
-  std::signal(SIGINT, on_signal);
-  std::signal(SIGTERM, on_signal);
   std::cout << "scancell-sim: CiA 402 drive node " << node << " on unix:" << path << std::endl;
   std::unique_ptr<sim::Cia402DriveSim> drive;
   std::string line;
@@ -225,8 +223,6 @@ int serve_modbus(int argc, char** argv) {
   const auto parsed = parse_modbus(argc, argv);
   if (const int* code = std::get_if<int>(&parsed)) return *code;
   const ModbusOptions& o = std::get<ModbusOptions>(parsed);
-  std::signal(SIGINT, on_signal);
-  std::signal(SIGTERM, on_signal);
   std::vector<std::unique_ptr<sim::ModbusDriveSim>> drive;
   try {
     for (int k = 0; k < o.drives; ++k) {
@@ -257,12 +253,11 @@ int serve_modbus(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // Every server runs until SIGINT/SIGTERM (or its own end): one pair of handlers for all.
+  std::signal(SIGINT, on_signal);
+  std::signal(SIGTERM, on_signal);
   if (argc >= 2 && std::strcmp(argv[1], "can") == 0) return serve_can(argc, argv);
   if (argc >= 2 && std::strcmp(argv[1], "modbus") == 0) return serve_modbus(argc, argv);
-  if (argc >= 2 && std::strcmp(argv[1], "scanner") == 0) {
-    std::signal(SIGINT, on_signal);
-    std::signal(SIGTERM, on_signal);
-    return scancell::tools::serve_scanner(argc, argv, g_stop);
-  }
+  if (argc >= 2 && std::strcmp(argv[1], "scanner") == 0) return scancell::tools::serve_scanner(argc, argv, g_stop);
   return usage();
 }
