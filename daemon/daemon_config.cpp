@@ -193,17 +193,19 @@ void read_jobs(DaemonConfig& c, scancell::Section s) {
   j.planner_threads = s.ranged("planner_threads", 0, 0, 1024);  // 0: all cores
   c.home_timeout = std::chrono::milliseconds(std::lround(1000.0 * s.positive_up_to("home_timeout_s", 60.0, 3600.0)));
   if (s.has("phase_trace_file")) j.phase_trace_file = relative_to(c.file, s.get<std::string>("phase_trace_file"));
+  s.declare("phase_trace_file", "none", "");  // optional, no default: the trace is off unless a file is named
   if (s.has("allowed_dirs")) read_allowed_dirs(c, s);
   s.finish();
 }
 
 }  // namespace
 
-DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_dir, const std::string& socket) {
+DaemonConfig load_daemon_config(const fs::path& file, const std::string& data_dir, const std::string& socket,
+                                KeyDeclarations* declared) {
   DaemonConfig c;
   c.file = fs::absolute(file);
   YAML::Node holder;
-  scancell::Section y = scancell::open_root(c.file, holder);
+  scancell::Section y = scancell::open_root(c.file, holder, declared);
   read_files(c, y, data_dir);
   read_control(c, y.section("control"), socket);
   read_scanner(c, y.section("scanner"));

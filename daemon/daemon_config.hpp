@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "common/key_declaration.hpp"
 #include "daemon/control.hpp"
 #include "daemon/job_runner.hpp"
 #include "drivers/config.hpp"
@@ -46,8 +47,10 @@ struct DaemonConfig {
 };
 
 /// Reads the config and every file it names. `data_dir` / `socket` override the file's values when not empty.
+/// `declared`, when given, receives what the loader declares for every key of this file it reads (default
+/// and range), for the test that holds docs/daemon.md's key table to it.
 DaemonConfig load_daemon_config(const std::filesystem::path& file, const std::string& data_dir = "",
-                                const std::string& socket = "");
+                                const std::string& socket = "", KeyDeclarations* declared = nullptr);
 
 /// The calibration in force: `calibration` files of the config, then the newest result of each kind in
 /// DATA_DIR/calibration/ (the daemon's own runs), applied in that order to the sensor and cell models.

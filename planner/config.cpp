@@ -106,9 +106,9 @@ ModelSpec spec_from(Section& y, const std::string& where, const std::string& def
 
 }  // namespace
 
-SensorModel load_sensor(const std::filesystem::path& file) {
+SensorModel load_sensor(const std::filesystem::path& file, KeyDeclarations* declared) {
   YAML::Node root;
-  Section y = open_root(file, root);
+  Section y = open_root(file, root, declared);
   return sensor_from(y, file.string(), file.stem().string());
 }
 
@@ -135,8 +135,7 @@ namespace {
 /// The detuned tests' margins (thesis 7.4.7) from a mapping: every key optional, none negative.
 Countermeasures parse_countermeasures(Section k) {
   Countermeasures cm;
-  cm.frustum_detune = k.non_negative("frustum_detune", 0.0);
-  if (!(cm.frustum_detune < 0.9)) k.fail(k.key_path("frustum_detune"), "must be in [0, 0.9)");
+  cm.frustum_detune = k.ranged_below("frustum_detune", 0.0, 0.0, 0.9);
   cm.dof_margin_mm = k.non_negative("dof_margin_mm", 0.0);
   cm.compliance_buffer = k.non_negative("compliance_buffer", 0.0);
   cm.visibility_margin_mm = k.non_negative("visibility_margin_mm", 0.0);
@@ -150,8 +149,9 @@ namespace {
 
 /// A count given as a YAML number (1e9 reads as a double): whole, within [lo, hi].
 std::uint64_t whole_number(Section& s, const std::string& key, std::uint64_t fallback, double lo, double hi) {
+  const double v = s.get_or<double>(key, static_cast<double>(fallback));
+  s.declare(key, Section::text_of(fallback), "[" + Section::text_of(lo) + ", " + Section::text_of(hi) + "]");
   if (!s.has(key)) return fallback;
-  const double v = s.get<double>(key);
   if (!(v >= lo && v <= hi && v == std::floor(v))) {
     std::ostringstream os;
     os << "must be a whole number in [" << lo << ", " << hi << "], got " << v;
@@ -172,8 +172,7 @@ void read_viewpoints(Section v, ViewpointSettings& vs) {
       v.ranged("free_space_min_position_spacing_fraction", vs.free_space_min_position_spacing_fraction, 0.0, 1.0);
   vs.twist_levels = v.ranged("twist_levels", vs.twist_levels, 1, 360);
   vs.standoff_adjust_max_mm = v.non_negative("standoff_adjust_max_mm", vs.standoff_adjust_max_mm);
-  vs.scan_length_design_incidence_rad = v.non_negative("scan_length_design_incidence_rad", vs.scan_length_design_incidence_rad);
-  if (!(vs.scan_length_design_incidence_rad < 1.5)) v.fail(v.key_path("scan_length_design_incidence_rad"), "must be < 1.5");
+  vs.scan_length_design_incidence_rad = v.ranged_below("scan_length_design_incidence_rad", vs.scan_length_design_incidence_rad, 0.0, 1.5);
   vs.clearance_mm = v.non_negative("clearance_mm", vs.clearance_mm);
   vs.bisector_tilt = v.get_or<bool>("bisector_tilt", vs.bisector_tilt);
   vs.open_direction_views = v.get_or<bool>("open_direction_views", vs.open_direction_views);
@@ -239,9 +238,9 @@ void read_matrix(Section m, PlannerSettings& p) {
 
 }  // namespace
 
-PlannerSettings load_planner_settings(const std::filesystem::path& file) {
+PlannerSettings load_planner_settings(const std::filesystem::path& file, KeyDeclarations* declared) {
   YAML::Node root;
-  Section y = open_root(file, root);
+  Section y = open_root(file, root, declared);
   PlannerSettings p;
   p.seed = y.get_or<std::uint64_t>("seed", p.seed);
   if (y.has("viewpoints")) read_viewpoints(y.section("viewpoints"), p.viewpoints);

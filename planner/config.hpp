@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <string>
 
+#include "common/key_declaration.hpp"
 #include "planner/core/cover.hpp"
 #include "planner/core/sensor.hpp"
 #include "planner/core/viewpoint.hpp"
@@ -46,9 +47,11 @@ struct PlannerSettings {
   bool keep_candidates = false;
 };
 
-SensorModel load_sensor(const std::filesystem::path& file);
+SensorModel load_sensor(const std::filesystem::path& file, KeyDeclarations* declared = nullptr);
 ModelSpec load_spec(const std::filesystem::path& file);
-PlannerSettings load_planner_settings(const std::filesystem::path& file);
+/// `declared`, when given, receives what the loader declares for every key it reads (default and range:
+/// common/yaml_section.hpp), for the test that holds docs/planner.md's key table to it.
+PlannerSettings load_planner_settings(const std::filesystem::path& file, KeyDeclarations* declared = nullptr);
 
 /// The same from YAML or JSON text (a plan file's `sensor` / `spec` objects); `where` prefixes messages.
 SensorModel parse_sensor(const std::string& text, const std::string& where);

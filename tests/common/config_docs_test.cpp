@@ -15,6 +15,9 @@
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
 
+#include "common/doc_tables.hpp"
+#include "planner/config.hpp"
+
 namespace scancell {
 namespace {
 
@@ -153,6 +156,27 @@ TEST(ConfigDocs, TheShippedColumnIsWhatTheFileShips) {
   expect_table_matches(planner, "Planner settings, `config/planner/default.yaml`", src / "config" / "planner" / "default.yaml");
   expect_table_matches(planner, "Sensor, `config/sensors/line-scan-thesis.yaml`", src / "config" / "sensors" / "line-scan-thesis.yaml");
   expect_table_matches(read(src / "docs" / "daemon.md"), "## Configuration (`config/scancelld.yaml`", src / "config" / "scancelld.yaml");
+}
+
+/// docs/planner.md's settings and sensor tables against what the loaders declare while reading the shipped
+/// files (issue 17): each key's default and range are declared once, in the loader call that reads it.
+TEST(ConfigDocs, ThePlannerAndSensorDefaultsAndRangesAreWhatTheLoadersDeclare) {
+  const fs::path src = SCANCELL_SOURCE_DIR;
+  const std::string doc = (src / "docs" / "planner.md").string();
+  KeyDeclarations settings;
+  planner::load_planner_settings(src / "config" / "planner" / "default.yaml", &settings);
+  // Sections (their keys have rows of their own).
+  const std::size_t n = test::expect_declared_as_documented(test::doc_table(doc, "Planner settings, `config/planner/default.yaml`"), settings,
+                                                            "default, range", {"matrix.free_space_countermeasures", "placement"},
+                                                            "docs/planner.md (settings)");
+  EXPECT_GE(n, 30u);
+  KeyDeclarations sensor;
+  planner::load_sensor(src / "config" / "sensors" / "line-scan-thesis.yaml", &sensor);
+  // The sensor's ranges are the model's invariants, checked for a model from any source (a sensor file, a
+  // plan file, a calibration result: validate(SensorModel)); its table's defaults are the loader's.
+  const std::size_t m = test::expect_declared_as_documented(test::doc_table(doc, "Sensor, `config/sensors/line-scan-thesis.yaml`"), sensor,
+                                                            "default, range", {}, "docs/planner.md (sensor)", false);
+  EXPECT_GE(m, 15u);
 }
 
 }  // namespace
