@@ -48,7 +48,6 @@ namespace bench = scancell::bench;
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
 struct Options {
   std::string meshes_dir = std::string(SCANCELL_SOURCE_DIR) + "/../shared/meshes";
@@ -124,7 +123,7 @@ Row judge(const sp::TriangleMesh& fine_mesh, const std::optional<sp::CellModel>&
   ro.target_vertices = o.rough_vertices;
   const auto t0 = Clock::now();
   const sp::ViewPlan plan = sp::plan_views(fine_mesh, sensor, spec, settings, ro, n_threads, cell ? &*cell : nullptr);
-  row.plan_s = since(t0);
+  row.plan_s = scancell::seconds_since(t0);
   // The fine mesh's rows, in the plan's object frame, with the plate.
   const sp::RoughModel fine = sp::make_rough_model(fine_mesh);
   sp::TriangleMesh scene_mesh = fine.mesh();

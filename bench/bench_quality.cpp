@@ -42,7 +42,6 @@ namespace fs = std::filesystem;
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
 struct Object {
   std::string name;
@@ -154,7 +153,7 @@ struct Bench {
     vo.seed = o.seed;
     const auto t = Clock::now();
     const sp::Verification v = sp::verify_views(fine, sensor, spec, poses, est, vo);
-    r.verify_s = since(t);
+    r.verify_s = scancell::seconds_since(t);
     r.views = views.size();
     r.mv = v.mv;
     r.mv_analytic = v.mv_analytic;
@@ -187,7 +186,7 @@ struct Bench {
       r.method = mode == sp::CoverMode::greedy ? "3M greedy" : mode == sp::CoverMode::constrained ? "3M constrained t_r=0.2" : "3M exact t_r=0.2";
       const auto t = Clock::now();
       const sp::ViewPlan plan = sp::plan_views(fine, sensor, spec, settings, rough);
-      r.plan_s = since(t);
+      r.plan_s = scancell::seconds_since(t);
       r.rough_vertices = plan.rough.size();
       r.estimated = plan.cover.cumulative_fraction.empty() ? 0.0 : plan.cover.cumulative_fraction.back();
       r.unmeasurable = 1.0 - plan.cover.measurable_fraction;
@@ -230,7 +229,7 @@ struct Bench {
       sp::CoverSettings cs;
       cs.mode = sp::CoverMode::greedy;
       const sp::CoverResult cover = sp::greedy_cover(m, rm.area_mm2, cs);
-      r.plan_s = since(t);
+      r.plan_s = scancell::seconds_since(t);
       r.rough_vertices = rm.size();
       r.estimated = cover.cumulative_fraction.empty() ? 0.0 : cover.cumulative_fraction.back();
       r.unmeasurable = 1.0 - cover.measurable_fraction;

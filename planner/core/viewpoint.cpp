@@ -306,6 +306,68 @@ std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const Occlus
   return out;
 }
 
+namespace {
+
+/// Spread targets for open-direction views: farthest-point order over `rows` (position and normal, as for
+/// RM_v), at most `max_rows`, sorted.
+std::vector<std::uint32_t> spread_targets(const RoughModel& rough, const SensorModel& sensor, const std::vector<std::uint32_t>& rows,
+                                          std::size_t max_rows) {
+  std::vector<std::uint32_t> targets;
+  const double w2 = std::pow(sensor.optimal_standoff_mm * std::tan(0.5 * sensor.fov_x_rad), 2);
+  // Targets closer than a quarter of the footprint width to one another add nothing a neighbour's views
+  // do not: stop there, so a cluster of unmeasurable rows (a hole) gets a few targets, not one per row.
+  const double min_spacing2 = std::pow(0.5 * sensor.optimal_standoff_mm * std::tan(0.5 * sensor.fov_x_rad), 2);
+  std::vector<double> d2(rows.size(), std::numeric_limits<double>::infinity());
+  std::size_t next = 0;
+  while (targets.size() < std::min(max_rows, rows.size())) {
+    targets.push_back(rows[next]);
+    const Eigen::Vector3d p = rough.points[rows[next]], nn = rough.normals[rows[next]];
+    double best = -1.0;
+    for (std::size_t i = 0; i < rows.size(); ++i) {
+      d2[i] = std::min(d2[i], (rough.points[rows[i]] - p).squaredNorm() + w2 * (rough.normals[rows[i]] - nn).squaredNorm());
+      if (d2[i] > best) best = d2[i], next = i;
+    }
+    if (best < min_spacing2) break;
+  }
+  std::sort(targets.begin(), targets.end());
+  return targets;
+}
+
+/// Probe directions: a Fibonacci spiral of `count` on the cap of half-angle `cap` around +Z.
+std::vector<Eigen::Vector3d> cap_probes(double cap, int count) {
+  std::vector<Eigen::Vector3d> local;
+  for (int i = 0; i < count; ++i) {
+    const double cz = 1.0 - (1.0 - std::cos(cap)) * (i + 0.5) / count;
+    const double sz = std::sqrt(std::max(0.0, 1.0 - cz * cz));
+    const double az = i * std::numbers::pi * (3.0 - std::sqrt(5.0));
+    local.emplace_back(sz * std::cos(az), sz * std::sin(az), cz);
+  }
+  return local;
+}
+
+/// A spread subset of `open` of at most `count`: start nearest the normal `n`, then farthest-first on the sphere.
+std::vector<Eigen::Vector3d> spread_directions(const std::vector<Eigen::Vector3d>& open, const Eigen::Vector3d& n, int count) {
+  std::vector<Eigen::Vector3d> keep;
+  std::size_t first = 0;
+  for (std::size_t i = 1; i < open.size(); ++i)
+    if (open[i].dot(n) > open[first].dot(n)) first = i;
+  keep.push_back(open[first]);
+  while (keep.size() < static_cast<std::size_t>(std::max(1, count)) && keep.size() < open.size()) {
+    std::size_t best = 0;
+    double best_d = -1.0;
+    for (std::size_t i = 0; i < open.size(); ++i) {
+      double nearest = 4.0;
+      for (const auto& q : keep) nearest = std::min(nearest, (open[i] - q).squaredNorm());
+      if (nearest > best_d) best_d = nearest, best = i;
+    }
+    if (best_d <= 1e-12) break;
+    keep.push_back(open[best]);
+  }
+  return keep;
+}
+
+}  // namespace
+
 std::vector<Viewpoint> open_direction_viewpoints(const RoughModel& rough, const OcclusionScene& scene,
                                                  const SensorModel& sensor, const ModelSpec& spec,
                                                  const ViewpointSettings& st, const std::vector<std::uint32_t>& rows,
@@ -314,43 +376,15 @@ std::vector<Viewpoint> open_direction_viewpoints(const RoughModel& rough, const 
     if (targeted_rows) *targeted_rows = 0;
     return {};
   }
-  // Spread the targets: farthest-point order over the given rows (position and normal, as for RM_v).
-  std::vector<std::uint32_t> targets;
-  {
-    const double w2 = std::pow(sensor.optimal_standoff_mm * std::tan(0.5 * sensor.fov_x_rad), 2);
-    // Targets closer than a quarter of the footprint width to one another add nothing a neighbour's views
-    // do not: stop there, so a cluster of unmeasurable rows (a hole) gets a few targets, not one per row.
-    const double min_spacing2 = std::pow(0.5 * sensor.optimal_standoff_mm * std::tan(0.5 * sensor.fov_x_rad), 2);
-    std::vector<double> d2(rows.size(), std::numeric_limits<double>::infinity());
-    std::size_t next = 0;
-    while (targets.size() < std::min(max_rows, rows.size())) {
-      targets.push_back(rows[next]);
-      const Eigen::Vector3d p = rough.points[rows[next]], nn = rough.normals[rows[next]];
-      double best = -1.0;
-      for (std::size_t i = 0; i < rows.size(); ++i) {
-        d2[i] = std::min(d2[i], (rough.points[rows[i]] - p).squaredNorm() + w2 * (rough.normals[rows[i]] - nn).squaredNorm());
-        if (d2[i] > best) best = d2[i], next = i;
-      }
-      if (best < min_spacing2) break;
-    }
-    std::sort(targets.begin(), targets.end());
-  }
+  const std::vector<std::uint32_t> targets = spread_targets(rough, sensor, rows, max_rows);
   if (targeted_rows) *targeted_rows = targets.size();
 
   const double r_near = sensor.optimal_standoff_mm * st.standoff_factor;
   // Not all the way to the precision limit: views there comply only at normal incidence and verify poorly.
   const double r_far = std::max(r_near, std::min(sensor.range_max_mm, max_range_for_precision_mm(sensor, spec)) * 0.8);
   const int levels = std::max(1, st.open_direction_standoffs);
-  // Probe directions: a Fibonacci spiral on the cap within the stricter grazing limit of the normal.
-  const double cap = 0.9 * std::min(sensor.grazing_xz_rad, sensor.grazing_yz_rad);
-  constexpr int kProbes = 96;
-  std::vector<Eigen::Vector3d> local;  // around +Z
-  for (int i = 0; i < kProbes; ++i) {
-    const double cz = 1.0 - (1.0 - std::cos(cap)) * (i + 0.5) / kProbes;
-    const double sz = std::sqrt(std::max(0.0, 1.0 - cz * cz));
-    const double az = i * std::numbers::pi * (3.0 - std::sqrt(5.0));
-    local.emplace_back(sz * std::cos(az), sz * std::sin(az), cz);
-  }
+  // Probe directions within the stricter grazing limit of the normal.
+  const std::vector<Eigen::Vector3d> local = cap_probes(0.9 * std::min(sensor.grazing_xz_rad, sensor.grazing_yz_rad), 96);
   const double eps = 0.01 * rough.mean_edge_mm + 1e-3;
 
   std::vector<std::vector<Viewpoint>> per_row(targets.size());
@@ -364,24 +398,7 @@ std::vector<Viewpoint> open_direction_viewpoints(const RoughModel& rough, const 
       if (!scene.first_hit(p + eps * n, d, 0.0, r_far)) open.push_back(d);
     }
     if (open.empty()) return;
-    // Keep a spread subset: start nearest the normal, then farthest-first on the sphere.
-    std::vector<Eigen::Vector3d> keep;
-    std::size_t first = 0;
-    for (std::size_t i = 1; i < open.size(); ++i)
-      if (open[i].dot(n) > open[first].dot(n)) first = i;
-    keep.push_back(open[first]);
-    while (keep.size() < static_cast<std::size_t>(std::max(1, st.open_directions_per_row)) && keep.size() < open.size()) {
-      std::size_t best = 0;
-      double best_d = -1.0;
-      for (std::size_t i = 0; i < open.size(); ++i) {
-        double nearest = 4.0;
-        for (const auto& q : keep) nearest = std::min(nearest, (open[i] - q).squaredNorm());
-        if (nearest > best_d) best_d = nearest, best = i;
-      }
-      if (best_d <= 1e-12) break;
-      keep.push_back(open[best]);
-    }
-    for (const auto& d : keep)
+    for (const auto& d : spread_directions(open, n, st.open_directions_per_row))
       for (int s = 0; s < levels; ++s) {
         const double standoff = levels == 1 ? r_near : r_near + (r_far - r_near) * s / (levels - 1);
         const Eigen::Vector3d position = p + standoff * d;

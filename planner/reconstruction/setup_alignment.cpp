@@ -87,18 +87,10 @@ void validate(const std::vector<Eigen::Vector3d>& points, const std::vector<Eige
   if (!(o.axis_direction.norm() > 1e-9)) throw std::invalid_argument("align_setup: the table axis has no direction");
 }
 
-}  // namespace
-
-SetupAlignmentResult align_setup(const std::vector<Eigen::Vector3d>& points, const std::vector<Eigen::Vector3d>& normals,
-                                 const ModelCloud& model, const SetupAlignmentOptions& o) {
-  validate(points, normals, o);
-  SetupAlignmentResult res;
-  const Eigen::Vector3d axis = o.axis_direction.normalized();
-  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
-  for (const auto& p : points) centroid += p;
-  if (!points.empty()) centroid /= static_cast<double>(points.size());
-
-  // Coarse: every start on an even subset, wide pairing distance (the placement error's bound).
+/// Coarse stage: a start at each of `angle_steps` turns about the table axis, on an even subset of the samples
+/// with the wide pairing distance (the placement error's bound). One fit per start, in start order.
+std::vector<SetupAlignmentFit> coarse_fits(const std::vector<Eigen::Vector3d>& points, const std::vector<Eigen::Vector3d>& normals,
+                                           const ModelCloud& model, const Eigen::Vector3d& axis, const SetupAlignmentOptions& o) {
   const std::size_t stride = std::max<std::size_t>(1, points.size() / std::max<std::size_t>(1, o.coarse_samples));
   std::vector<Eigen::Vector3d> sub_p, sub_n, tp, tn;
   for (std::size_t i = 0; i < points.size(); i += stride) {
@@ -117,6 +109,7 @@ SetupAlignmentResult align_setup(const std::vector<Eigen::Vector3d>& points, con
   // tilt exactly; left free, the samples' noise and the model's facets would tilt the fit (0.035° on an
   // elephant, 0.05 mm at its centre).
   coarse.plate_axis = IcpOptions::PlateAxis{o.axis_point, axis};
+  std::vector<SetupAlignmentFit> fits;
   for (int k = 0; k < o.angle_steps; ++k) {
     SetupAlignmentFit f;
     f.start_angle_rad = 2.0 * std::numbers::pi * k / o.angle_steps;
@@ -128,30 +121,48 @@ SetupAlignmentResult align_setup(const std::vector<Eigen::Vector3d>& points, con
     f.rms_mm = icp.rms_mm;
     f.overlap = icp.overlap;
     f.correction = icp.correction * start;
-    res.fits.push_back(f);
+    fits.push_back(f);
   }
+  return fits;
+}
 
-  // Distinct coarse outcomes, best first (residual per paired share), each refined on every sample. A start
-  // still moving after the coarse iterations is an outcome too.
+/// Distinct coarse outcomes, best first (residual per paired share), at most `refined_outcomes`. A start still
+/// moving after the coarse iterations is an outcome too.
+std::vector<int> distinct_outcomes(const std::vector<SetupAlignmentFit>& fits, const Eigen::Vector3d& centroid,
+                                   const SetupAlignmentOptions& o) {
   std::vector<int> order;
-  for (int k = 0; k < static_cast<int>(res.fits.size()); ++k)
-    if (res.fits[k].ok || res.fits[k].why.rfind("did not converge", 0) == 0) order.push_back(k);
-  auto score = [&](int k) { return res.fits[k].rms_mm / std::max(1e-9, res.fits[k].overlap); };
+  for (int k = 0; k < static_cast<int>(fits.size()); ++k)
+    if (fits[k].ok || fits[k].why.rfind("did not converge", 0) == 0) order.push_back(k);
+  auto score = [&](int k) { return fits[k].rms_mm / std::max(1e-9, fits[k].overlap); };
   std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return score(a) < score(b); });
-  std::vector<int> distinct_fits;
+  std::vector<int> out;
   for (int k : order) {
     bool is_new = true;
-    for (int d : distinct_fits) is_new &= distinct(res.fits[k].correction, res.fits[d].correction, centroid, o);
-    if (is_new) distinct_fits.push_back(k);
-    if (static_cast<int>(distinct_fits.size()) == o.refined_outcomes) break;
+    for (int d : out) is_new &= distinct(fits[k].correction, fits[d].correction, centroid, o);
+    if (is_new) out.push_back(k);
+    if (static_cast<int>(out.size()) == o.refined_outcomes) break;
   }
+  return out;
+}
+
+/// The pairing of the fine stage: every sample, the fine distance, converged to 0.1 µm.
+IcpOptions fine_options(const SetupAlignmentOptions& o) {
   IcpOptions fine;
   fine.partial = true;
   fine.max_distance_mm = o.fine_distance_mm;
   fine.min_overlap = o.min_overlap;
   fine.converged_mm = 1e-4;
-  for (int k : distinct_fits) {
-    SetupAlignmentFit& f = res.fits[k];
+  return fine;
+}
+
+/// Fine stage: each distinct outcome refined on every sample, about the table axis where that outcome put it.
+void refine(std::vector<SetupAlignmentFit>& fits, const std::vector<int>& outcomes, const std::vector<Eigen::Vector3d>& points,
+            const std::vector<Eigen::Vector3d>& normals, const ModelCloud& model, const Eigen::Vector3d& axis,
+            const SetupAlignmentOptions& o) {
+  IcpOptions fine = fine_options(o);
+  std::vector<Eigen::Vector3d> tp, tn;
+  for (int k : outcomes) {
+    SetupAlignmentFit& f = fits[k];
     moved(f.correction, points, normals, tp, tn);
     fine.plate_axis = IcpOptions::PlateAxis{f.correction * o.axis_point, f.correction.linear() * axis};
     const IcpResult icp = register_points(tp, model, fine, {}, tn);
@@ -163,13 +174,77 @@ SetupAlignmentResult align_setup(const std::vector<Eigen::Vector3d>& points, con
     if (icp.ok) f.correction = icp.correction * f.correction;
     f.free_directions = icp.free_directions;
   }
+}
+
+/// Whether the shape fixes the best fit on the plate at all (a surface of revolution does not fix its turn);
+/// false with `res.why` set when it does not.
+bool shape_fixes_the_part(SetupAlignmentResult& res, const std::vector<Eigen::Vector3d>& points, const ModelCloud& model,
+                          const Eigen::Vector3d& axis, const SetupAlignmentOptions& o) {
+  std::vector<Eigen::Vector3d> at_best, unused;
+  moved(res.correction, points, {}, at_best, unused);
+  double turn_share = 0.0;
+  res.plate_conditioning = plate_conditioning(at_best, model, res.correction * o.axis_point, res.correction.linear() * axis,
+                                              o.fine_distance_mm, fine_options(o).lever_mm, &turn_share);
+  if (res.plate_conditioning >= o.min_plate_conditioning) return true;
+  res.ambiguous = true;
+  res.why = std::string("the part's shape does not fix ") +
+            (turn_share > 0.5 ? "its turn about the table axis" : "its position on the plate") + " (conditioning " +
+            std::to_string(res.plate_conditioning) + ", limit " + std::to_string(o.min_plate_conditioning) +
+            "): a part that slides so cannot be aligned by its shape; not merged";
+  return false;
+}
+
+/// The verdict on the best refined fit: too large a residual, or a distinct pose that fits nearly as well (the
+/// turn would be a guess), refuses the alignment with `res.why`; otherwise it is ok.
+void judge(SetupAlignmentResult& res, int best, const std::vector<int>& outcomes, const Eigen::Vector3d& centroid,
+           const Eigen::Vector3d& axis, const SetupAlignmentOptions& o) {
+  const SetupAlignmentFit& b = res.fits[best];
+  for (int k : outcomes) {
+    const SetupAlignmentFit& f = res.fits[k];
+    if (k == best || !f.ok || !distinct(f.correction, b.correction, centroid, o)) continue;
+    if (res.runner_up < 0 || f.rms_mm < res.fits[res.runner_up].rms_mm) res.runner_up = k;
+  }
+  if (b.rms_mm > o.max_rms_mm) {
+    res.why = "the best alignment leaves " + std::to_string(b.rms_mm) + " mm RMS (limit " + std::to_string(o.max_rms_mm) +
+              " mm): the new setup does not match the model measured so far; not merged";
+    return;
+  }
+  if (res.runner_up >= 0) {
+    const SetupAlignmentFit& r = res.fits[res.runner_up];
+    if (r.rms_mm <= o.ambiguity_rms_ratio * b.rms_mm && r.overlap >= o.ambiguity_overlap_ratio * b.overlap) {
+      double tilt = 0.0;
+      const double other = turn_about_axis(r.correction.linear(), axis, &tilt);
+      res.ambiguous = true;
+      res.why = "ambiguous: turns of " + std::to_string(res.turn_rad * 180.0 / std::numbers::pi) + " and " +
+                std::to_string(other * 180.0 / std::numbers::pi) + " deg fit alike (" + std::to_string(b.rms_mm) + " and " +
+                std::to_string(r.rms_mm) + " mm RMS): the part looks the same both ways; not merged";
+      return;
+    }
+  }
+  res.ok = true;
+}
+
+}  // namespace
+
+SetupAlignmentResult align_setup(const std::vector<Eigen::Vector3d>& points, const std::vector<Eigen::Vector3d>& normals,
+                                 const ModelCloud& model, const SetupAlignmentOptions& o) {
+  validate(points, normals, o);
+  SetupAlignmentResult res;
+  const Eigen::Vector3d axis = o.axis_direction.normalized();
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  for (const auto& p : points) centroid += p;
+  if (!points.empty()) centroid /= static_cast<double>(points.size());
+
+  res.fits = coarse_fits(points, normals, model, axis, o);
+  const std::vector<int> outcomes = distinct_outcomes(res.fits, centroid, o);
+  refine(res.fits, outcomes, points, normals, model, axis, o);
 
   int best = -1;
-  for (int k : distinct_fits)
+  for (int k : outcomes)
     if (res.fits[k].ok && (best < 0 || res.fits[k].rms_mm < res.fits[best].rms_mm)) best = k;
   if (best < 0) {
     // The reason of the most promising start (refined, when any start came near at all).
-    const SetupAlignmentFit& first = distinct_fits.empty() ? res.fits.front() : res.fits[distinct_fits.front()];
+    const SetupAlignmentFit& first = outcomes.empty() ? res.fits.front() : res.fits[outcomes.front()];
     res.why = "no start of the " + std::to_string(o.angle_steps) + " turns aligned the new setup to the model (best: " +
               first.why + "): check the resting pose the operator used";
     return res;
@@ -181,45 +256,7 @@ SetupAlignmentResult align_setup(const std::vector<Eigen::Vector3d>& points, con
   res.turn_rad = turn_about_axis(b.correction.linear(), axis, &res.tilt_rad);
   res.shift_mm = (b.correction * centroid - centroid).norm();
   res.free_directions = b.free_directions;
-  {
-    std::vector<Eigen::Vector3d> at_best;
-    moved(b.correction, points, {}, at_best, tn);
-    double turn_share = 0.0;
-    res.plate_conditioning = plate_conditioning(at_best, model, b.correction * o.axis_point, b.correction.linear() * axis,
-                                                o.fine_distance_mm, fine.lever_mm, &turn_share);
-    if (res.plate_conditioning < o.min_plate_conditioning) {
-      res.ambiguous = true;
-      res.why = std::string("the part's shape does not fix ") +
-                (turn_share > 0.5 ? "its turn about the table axis" : "its position on the plate") + " (conditioning " +
-                std::to_string(res.plate_conditioning) + ", limit " + std::to_string(o.min_plate_conditioning) +
-                "): a part that slides so cannot be aligned by its shape; not merged";
-      return res;
-    }
-  }
-  // The best distinct alternative: a pose that fits nearly as well makes the turn a guess.
-  for (int k : distinct_fits) {
-    const SetupAlignmentFit& f = res.fits[k];
-    if (k == best || !f.ok || !distinct(f.correction, b.correction, centroid, o)) continue;
-    if (res.runner_up < 0 || f.rms_mm < res.fits[res.runner_up].rms_mm) res.runner_up = k;
-  }
-  if (b.rms_mm > o.max_rms_mm) {
-    res.why = "the best alignment leaves " + std::to_string(b.rms_mm) + " mm RMS (limit " + std::to_string(o.max_rms_mm) +
-              " mm): the new setup does not match the model measured so far; not merged";
-    return res;
-  }
-  if (res.runner_up >= 0) {
-    const SetupAlignmentFit& r = res.fits[res.runner_up];
-    if (r.rms_mm <= o.ambiguity_rms_ratio * b.rms_mm && r.overlap >= o.ambiguity_overlap_ratio * b.overlap) {
-      double tilt = 0.0;
-      const double other = turn_about_axis(r.correction.linear(), axis, &tilt);
-      res.ambiguous = true;
-      res.why = "ambiguous: turns of " + std::to_string(res.turn_rad * 180.0 / std::numbers::pi) + " and " +
-                std::to_string(other * 180.0 / std::numbers::pi) + " deg fit alike (" + std::to_string(b.rms_mm) + " and " +
-                std::to_string(r.rms_mm) + " mm RMS): the part looks the same both ways; not merged";
-      return res;
-    }
-  }
-  res.ok = true;
+  if (shape_fixes_the_part(res, points, model, axis, o)) judge(res, best, outcomes, centroid, axis, o);
   return res;
 }
 
