@@ -22,6 +22,7 @@
 
 #include "common/timing.hpp"
 #include "daemon/job_limits.hpp"
+#include "planner/core/rough_model_limits.hpp"
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
@@ -323,7 +324,7 @@ void add_submit(CLI::App& app, Args& a) {
   submit->add_option("--spec", a.spec, "model specification (YAML; default: the daemon's)")->check(CLI::ExistingFile);
   submit->add_option("--settings", a.settings, "planner settings (YAML; default: the daemon's)")->check(CLI::ExistingFile);
   submit->add_option("--truth", a.truth, "simulation: the object actually on the table (default: the mesh)")->check(CLI::ExistingFile);
-  submit->add_option("--rough-vertices", a.rough_vertices, "rough-model size (rows of the measurability matrix)")->check(CLI::Range(50, 200000));
+  submit->add_option("--rough-vertices", a.rough_vertices, "rough-model size (rows of the measurability matrix)")->check(CLI::Range(scancell::planner::kMinRoughVertices, scancell::planner::kMaxRoughVertices));
   submit->add_option("--placement", a.placement,
                      "how the object rests on the plate: auto (plan its stable resting poses, keep the best; the result says "
                      "how to place it) or as_given (default: the daemon's settings)")

@@ -8,6 +8,7 @@
 
 #include <Eigen/Core>
 
+#include "planner/core/rough_model_limits.hpp"
 #include "planner/geometry/mesh.hpp"
 
 namespace scancell::planner {
@@ -25,10 +26,6 @@ struct RoughModel {
   std::size_t size() const { return points.size(); }
   TriangleMesh mesh() const { return {points, triangles}; }
 };
-
-/// The rough-model sizes a plan or job accepts (rows of the measurability matrix): fewer cannot carry a
-/// surface, more outgrow the matrix's memory and plan time.
-inline constexpr std::size_t kMinRoughVertices = 50, kMaxRoughVertices = 200000;
 
 struct RoughModelOptions {
   std::optional<std::size_t> target_vertices;  // --rough-vertices

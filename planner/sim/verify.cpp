@@ -126,6 +126,48 @@ void share_area(const TriangleMesh& fine, Verification& out) {
   for (double a : out.vertex_area_mm2) out.area_mm2 += a;
 }
 
+
+/// The fine model as verification reads it (area shares, vertex and face normals, its open rim) and the tally
+/// of what the executed views measured of it, view by view in order: each view's area alone, its gain, the
+/// cumulative m_v. Both verify_views (the plan executed here) and verify_images (images a job stored) count so.
+class FineTally {
+ public:
+  FineTally(const TriangleMesh& fine, Verification& out)
+      : fine_(fine), out_(out), vertex_normals_(area_weighted_normals(fine)), tri_normals_(face_normals(fine)),
+        on_boundary_(open_edge_vertices(fine)) {
+    share_area(fine, out);
+    out.measured.assign(fine.vertices.size(), 0);
+  }
+
+  /// The fine vertices `img` measures (vertices_measured).
+  std::vector<std::uint8_t> measured_by(const RangeImage& img, const ModelSpec& spec, std::size_t* compliant_samples) const {
+    return vertices_measured(fine_, vertex_normals_, tri_normals_, img, on_boundary_, spec, compliant_samples);
+  }
+
+  /// Counts the next view's `hit` vertices into `vv` (alone, gain, cumulative) and `out.measured`; `ids`,
+  /// when given, receives them.
+  void count(ViewVerification& vv, const std::vector<std::uint8_t>& hit, std::vector<std::uint32_t>* ids = nullptr) {
+    for (std::size_t v = 0; v < hit.size(); ++v) {
+      if (!hit[v]) continue;
+      if (ids) ids->push_back(static_cast<std::uint32_t>(v));
+      vv.alone_mm2 += out_.vertex_area_mm2[v];
+      if (!out_.measured[v]) {
+        out_.measured[v] = 1;
+        vv.gain_mm2 += out_.vertex_area_mm2[v];
+      }
+    }
+    cumulative_ += vv.gain_mm2;
+    vv.cumulative = out_.area_mm2 > 0.0 ? cumulative_ / out_.area_mm2 : 0.0;
+  }
+
+ private:
+  const TriangleMesh& fine_;
+  Verification& out_;
+  const std::vector<Eigen::Vector3d> vertex_normals_, tri_normals_;
+  const std::vector<std::uint8_t> on_boundary_;
+  double cumulative_ = 0.0;
+};
+
 }  // namespace
 
 Verification verify_views(const TriangleMesh& fine, const SensorModel& sensor, const ModelSpec& spec,
@@ -133,20 +175,14 @@ Verification verify_views(const TriangleMesh& fine, const SensorModel& sensor, c
                           const VerifyOptions& options) {
   const auto t0 = std::chrono::steady_clock::now();
   Verification out;
-  const std::size_t nv = fine.vertices.size();
-  share_area(fine, out);
-  const auto vertex_normals = area_weighted_normals(fine);
-  const auto tri_normals = face_normals(fine);
-  const auto on_boundary = open_edge_vertices(fine);
+  FineTally tally(fine, out);
   TriangleMesh scene_mesh = fine;
   append_mesh(scene_mesh, options.occluders);
   const OcclusionScene scene(scene_mesh);
 
   std::vector<std::vector<std::uint32_t>> measured_by(views.size());
-  std::vector<std::uint16_t> times_measured(nv, 0);
-  out.measured.assign(nv, 0);
+  std::vector<std::uint16_t> times_measured(fine.vertices.size(), 0);
   out.views.resize(views.size());
-  double cumulative = 0.0;
   for (std::size_t k = 0; k < views.size(); ++k) {
     ViewVerification& vv = out.views[k];
     vv.executed = sample_pose_error(views[k], options.pose_error, mix_seed(options.pose_seed, k, 1));
@@ -157,19 +193,8 @@ Verification verify_views(const TriangleMesh& fine, const SensorModel& sensor, c
     so.object_triangles = options.occluders.triangles.empty() ? 0 : fine.triangles.size();
     const RangeImage img = virtual_scan(scene, sensor, vv.executed, so, &vv.scan);
 
-    const std::vector<std::uint8_t> hit = vertices_measured(fine, vertex_normals, tri_normals, img, on_boundary, spec, &vv.compliant_samples);
-    for (std::size_t v = 0; v < nv; ++v) {
-      if (!hit[v]) continue;
-      measured_by[k].push_back(static_cast<std::uint32_t>(v));
-      vv.alone_mm2 += out.vertex_area_mm2[v];
-      ++times_measured[v];
-      if (!out.measured[v]) {
-        out.measured[v] = 1;
-        vv.gain_mm2 += out.vertex_area_mm2[v];
-      }
-    }
-    cumulative += vv.gain_mm2;
-    vv.cumulative = out.area_mm2 > 0.0 ? cumulative / out.area_mm2 : 0.0;
+    tally.count(vv, tally.measured_by(img, spec, &vv.compliant_samples), &measured_by[k]);
+    for (auto v : measured_by[k]) ++times_measured[v];
     vv.cumulative_estimated = k < estimated_cumulative.size() ? estimated_cumulative[k] : std::nan("");
   }
   for (std::size_t k = 0; k < views.size(); ++k)
@@ -209,13 +234,7 @@ Verification verify_views(const TriangleMesh& fine, const SensorModel& sensor, c
 Verification verify_images(const TriangleMesh& fine, const ModelSpec& spec, const std::vector<RangeImage>& images) {
   const auto t0 = std::chrono::steady_clock::now();
   Verification out;
-  const std::size_t nv = fine.vertices.size();
-  share_area(fine, out);
-  const auto vertex_normals = area_weighted_normals(fine);
-  const auto tri_normals = face_normals(fine);
-  const auto on_boundary = open_edge_vertices(fine);
-  out.measured.assign(nv, 0);
-  double cumulative = 0.0;
+  FineTally tally(fine, out);
   for (std::size_t k = 0; k < images.size(); ++k) {
     const RangeImage& im = images[k];
     if (!im.has_truth())
@@ -227,17 +246,7 @@ Verification verify_images(const TriangleMesh& fine, const ModelSpec& spec, cons
                         " beyond the fine model's " + std::to_string(fine.triangles.size()) + " (not a scan of this model)");
     ViewVerification vv;
     vv.executed = images[k].pose;
-    const auto hit = vertices_measured(fine, vertex_normals, tri_normals, images[k], on_boundary, spec, &vv.compliant_samples);
-    for (std::size_t v = 0; v < nv; ++v) {
-      if (!hit[v]) continue;
-      vv.alone_mm2 += out.vertex_area_mm2[v];
-      if (!out.measured[v]) {
-        out.measured[v] = 1;
-        vv.gain_mm2 += out.vertex_area_mm2[v];
-      }
-    }
-    cumulative += vv.gain_mm2;
-    vv.cumulative = out.area_mm2 > 0.0 ? cumulative / out.area_mm2 : 0.0;
+    tally.count(vv, tally.measured_by(images[k], spec, &vv.compliant_samples));
     vv.cumulative_estimated = std::nan("");
     out.views.push_back(vv);
   }

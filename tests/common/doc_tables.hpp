@@ -176,17 +176,20 @@ inline std::size_t expect_declared_as_documented(const std::vector<DocRow>& rows
     // "= `range_min_mm`", "= the file's name": a default taken from elsewhere, not a value of its own.
     const bool derived = def.rfind("=", 0) == 0;
     ++compared;
-    if (!conditional && !derived)
+    if (!conditional && !derived) {
       EXPECT_TRUE(same_doc_value(def, d->second.fallback))
           << where << ":" << r.line << ": `" << key << "` documented default " << def << ", the loader's " << d->second.fallback;
-    if (!d->second.range.empty() && check_ranges)
+    }
+    if (!d->second.range.empty() && check_ranges) {
       EXPECT_TRUE(same_doc_range(range, d->second.range))
           << where << ":" << r.line << ": `" << key << "` documented range '" << range << "', the loader's " << d->second.range;
+    }
   }
   for (const auto& d : declared)
-    if (!d.range.empty())
+    if (!d.range.empty()) {
       EXPECT_TRUE(documented.count(d.path)) << where << ": `" << d.path << "` (default " << d.fallback << ", " << d.range
                                             << ") is declared by the loader but has no row";
+    }
   return compared;
 }
 

@@ -35,7 +35,7 @@ TEST(DaemonConfigDocs, TheDefaultAndRangeColumnIsWhatTheLoaderDeclares) {
   // need, and a truth section.
   const fs::path dir = fs::temp_directory_path() / "scancell_daemon_config_docs";
   KeyDeclarations declared;
-  for (const fs::path f : {shipped_config_here(src, dir), src / "config/demo/scancelld.yaml", src / "config/demo/scancelld-gige.yaml"}) {
+  for (const fs::path& f : {shipped_config_here(src, dir), src / "config/demo/scancelld.yaml", src / "config/demo/scancelld-gige.yaml"}) {
     KeyDeclarations one;
     load_daemon_config(f, dir.string(), (dir / "control.sock").string(), &one);
     for (const auto& d : one) {
