@@ -3,24 +3,11 @@
 #include "daemon/job_runner_detail.hpp"
 
 #include <algorithm>
-#include <cmath>
-#include <filesystem>
-#include <random>
 #include <string>
 #include <vector>
 
-#include "common/errors.hpp"
-#include "common/json_matrix.hpp"
-#include "common/timing.hpp"
-#include "daemon/acquire.hpp"
 #include "daemon/job_product.hpp"
 #include "daemon/job_result.hpp"
-#include "planner/geometry/mesh.hpp"
-#include "planner/geometry/surface_distance.hpp"
-#include "planner/kinematics/pose_error.hpp"
-#include "planner/placement.hpp"
-#include "planner/sim/verify.hpp"
-#include "planner/sim/virtual_scanner.hpp"
 
 namespace scancell::daemon {
 

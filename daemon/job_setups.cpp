@@ -11,16 +11,11 @@
 
 #include "common/errors.hpp"
 #include "common/json_matrix.hpp"
-#include "common/timing.hpp"
-#include "daemon/acquire.hpp"
 #include "daemon/job_product.hpp"
 #include "daemon/job_result.hpp"
-#include "planner/geometry/mesh.hpp"
-#include "planner/geometry/surface_distance.hpp"
-#include "planner/kinematics/pose_error.hpp"
 #include "planner/placement.hpp"
+#include "planner/reconstruction/setup_alignment.hpp"
 #include "planner/sim/verify.hpp"
-#include "planner/sim/virtual_scanner.hpp"
 
 namespace scancell::daemon {
 

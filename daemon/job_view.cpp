@@ -2,25 +2,15 @@
 // then count its coverage of the rough model.
 #include "daemon/job_runner_detail.hpp"
 
-#include <algorithm>
-#include <cmath>
-#include <filesystem>
-#include <random>
+#include <chrono>
 #include <string>
 #include <vector>
 
 #include "common/errors.hpp"
-#include "common/json_matrix.hpp"
 #include "common/timing.hpp"
 #include "daemon/acquire.hpp"
-#include "daemon/job_product.hpp"
-#include "daemon/job_result.hpp"
-#include "planner/geometry/mesh.hpp"
-#include "planner/geometry/surface_distance.hpp"
-#include "planner/kinematics/pose_error.hpp"
-#include "planner/placement.hpp"
-#include "planner/sim/verify.hpp"
-#include "planner/sim/virtual_scanner.hpp"
+#include "planner/reconstruction/registration.hpp"
+#include "planner/scan/range_image.hpp"
 
 namespace scancell::daemon {
 
