@@ -92,6 +92,7 @@ struct Stage {
   const std::vector<std::uint8_t>* measured_rows;    // replans: rows already measured
   const std::atomic<int>* cancel;
   const CollisionChecker* checker;                   // with a cell
+  const RowFootprints* footprints;                   // replans: what the open rows lack (footprint.hpp)
 };
 
 /// Free space: the margin against the rough model's own error (config.hpp), merged field by field, the larger.
@@ -233,6 +234,17 @@ std::vector<Viewpoint> make_candidates(const Stage& s, const OcclusionScene& sce
                                                     *s.checker, &p.cell_generation);
     fit_to_cell(s, segment_views);
     native.insert(native.end(), segment_views.begin(), segment_views.end());
+    if (s.footprints) {
+      // A replan also aims at what each open row lacks, not only at rough-model rows: the sample of its
+      // unfilled cells nearest their middle, along that sample's normal (the cell oracle aims at fine
+      // vertices so, and reaches rows no candidate of the optimal zone finishes).
+      CellGenerationReport aimed;
+      const std::vector<Viewpoint> at = cell_viewpoints_at(footprint_aims(*s.footprints, s.sensor.optimal_standoff_mm * vs.standoff_factor),
+                                                           s.sensor, s.spec, s.settings.viewpoints, *p.cell, *s.checker, &aimed);
+      native.insert(native.end(), at.begin(), at.end());
+      p.cell_generation.footprint_aims = aimed.seeds;
+      p.cell_generation.footprint_candidates = aimed.candidates;
+    }
     candidates = std::move(native);
   } else {
     fit_to_cell(s, candidates);
@@ -462,6 +474,12 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
       p.settings.matrix.countermeasures = settings.matrix.countermeasures;
     }
     const std::vector<double> row_weight = row_weights(p.rough, measured_rows, row_weight_scale);
+    if (footprints) {
+      footprints->validate(static_cast<std::uint32_t>(p.rough.size()));
+      for (auto r : footprints->rows)
+        if (measured_rows && r < measured_rows->size() && (*measured_rows)[r])
+          throw DataError("replan: row " + std::to_string(r) + " has a footprint to predict and is flagged measured");
+    }
 
     t = Clock::now();
     // In a cell the fixtures (the turntable plate) occlude too: the underside of an object on the plate is
@@ -472,7 +490,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     t = Clock::now();
     std::unique_ptr<CollisionChecker> checker;
     if (p.cell) checker = std::make_unique<CollisionChecker>(*p.cell, p.rough.mesh());
-    const Stage stage{p, sensor, spec, settings, measured_rows, cancel, checker.get()};
+    const Stage stage{p, sensor, spec, settings, measured_rows, cancel, checker.get(), footprints};
     std::vector<Viewpoint> candidates = make_candidates(stage, scene);
     p.candidates = candidates.size();
     p.times.viewpoints_s = seconds_since(t);
@@ -482,9 +500,6 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     const MeasurabilityMatrix matrix = make_matrix(stage, scene, settings_in.matrix.countermeasures, candidates);
     std::optional<SampleCover> samples;
     if (footprints) {
-      for (auto r : footprints->rows)
-        if (measured_rows && r < measured_rows->size() && (*measured_rows)[r])
-          throw DataError("replan: row " + std::to_string(r) + " has a footprint to predict and is flagged measured");
       samples = cover_by_samples(matrix, row_weight, *footprints, scene, sensor, spec, candidates, settings.matrix,
                                  p.rough.mean_edge_mm, cancel);
     }
@@ -707,7 +722,9 @@ void cell_json(const ViewPlan& p, json& j) {
                               {"elevation_clamped", p.cell_generation.clamped},
                               {"stepped_back", p.cell_generation.stepped_back},
                               {"unreachable", p.cell_generation.unreachable},
-                              {"colliding", p.cell_generation.colliding}}},
+                              {"colliding", p.cell_generation.colliding},
+                              {"footprint_aims", p.cell_generation.footprint_aims},
+                              {"footprint_candidates", p.cell_generation.footprint_candidates}}},
                             {"travel_time_s", p.cell_report.travel_s},
                             {"scan_time_s", p.cell_report.scan_s},
                             {"total_time_s", p.cell_report.travel_s + p.cell_report.scan_s}};

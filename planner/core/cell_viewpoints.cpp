@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <numbers>
 #include <optional>
 
 #include <tbb/parallel_for.h>
@@ -137,6 +138,87 @@ std::vector<Viewpoint> arm_viewpoints(const std::vector<Viewpoint>& seeds, const
 
 }  // namespace
 
+namespace {
+
+/// What the expansion of aim points gives: the views kept, and why the others were not.
+struct Expanded {
+  std::vector<Viewpoint> views;
+  std::size_t clamped = 0, stepped_back = 0, unreachable = 0, colliding = 0;
+};
+
+/// turntable_lift_tilt: the five views of one aim point (the thesis' view along its normal with the elevation
+/// clamped to the tilt range, the bisector pair, the two oblique views), each at its first clear stand-off.
+Expanded expand_aim(const AimPoint& a, const SensorModel& sensor, const ModelSpec& spec, const ViewpointSettings& st,
+                    const CellModel& cell, const CollisionChecker& checker) {
+  const Eigen::Matrix3d object_to_table = cell.object_on_table.linear();
+  const Eigen::Matrix3d table_to_object = object_to_table.transpose();
+  const double elev_max = max_elevation(cell);
+  const double range_cap = std::min(sensor.range_max_mm, max_range_for_precision_mm(sensor, spec));
+  Expanded o;
+  Eigen::Vector3d b0 = object_to_table * (-a.normal);
+  const double elev0 = std::asin(std::clamp(b0.z(), -1.0, 1.0));
+  const double elev_c = std::clamp(elev0, -elev_max, elev_max);
+  if (elev_c != elev0) {
+    ++o.clamped;
+    // A face steeper than the tilt allows says little about the azimuth to view it from; look inwards
+    // from the rim side, where the radial axis has the most room (it cannot reach over the table's centre).
+    const Eigen::Vector3d p_table = cell.object_on_table * a.point;
+    if (p_table.head<2>().norm() > 1e-6) b0.head<2>() = -p_table.head<2>().normalized() * b0.head<2>().norm();
+  }
+  // The oblique pair: the elevation raised and lowered, both inside the tilt range (one side twice as far
+  // when the other would leave it).
+  double up = elev_c + st.cell_oblique_rad, down = elev_c - st.cell_oblique_rad;
+  if (up > elev_max) up = elev_c - 2.0 * st.cell_oblique_rad;
+  if (down < -elev_max) down = elev_c + 2.0 * st.cell_oblique_rad;
+  // (elevation, yaw sign): the thesis' view, the bisector pair, the two oblique views.
+  const std::pair<double, int> variants[] = {{elev_c, 0}, {elev_c, 1}, {elev_c, -1}, {up, 0}, {down, 0}};
+  int variant = 0;
+  for (const auto& [elev_raw, yaw_sign] : variants) {
+    const double elev = std::clamp(elev_raw, -elev_max, elev_max);
+    bool reachable = false;
+    // The bisector's yaw is half the triangulation angle at the stand-off tried.
+    auto yaw_at = [&](double standoff) { return yaw_sign * 0.5 * std::atan2(sensor.baseline_mm, standoff); };
+    const auto placed = first_clear_standoff(
+        cell, checker, a.point, a.standoff_mm, range_cap, st.cell_standoff_steps,
+        [&](double standoff) { return cell_frame(aim(b0, elev, yaw_at(standoff)), table_to_object); },
+        [&](double standoff, int) { return design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad); },
+        reachable);
+    if (placed) {
+      Viewpoint v = placed->view;
+      v.target_row = a.row;
+      v.twist_level = variant;
+      v.tilt_rad = yaw_at(v.standoff_mm);
+      o.views.push_back(v);
+      o.stepped_back += placed->step > 0;
+    } else {
+      ++(reachable ? o.colliding : o.unreachable);
+    }
+    ++variant;
+  }
+  return o;
+}
+
+/// turntable_lift_tilt: every aim point expanded (expand_aim), in order; parallel over the aims.
+std::vector<Viewpoint> turntable_viewpoints(const std::vector<AimPoint>& aims, const SensorModel& sensor, const ModelSpec& spec,
+                                            const ViewpointSettings& st, const CellModel& cell, const CollisionChecker& checker,
+                                            CellGenerationReport& rep) {
+  std::vector<Expanded> per(aims.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, aims.size(), 8), [&](const auto& range) {
+    for (std::size_t k = range.begin(); k != range.end(); ++k) per[k] = expand_aim(aims[k], sensor, spec, st, cell, checker);
+  });
+  std::vector<Viewpoint> out;
+  for (auto& o : per) {
+    rep.clamped += o.clamped;
+    rep.stepped_back += o.stepped_back;
+    rep.unreachable += o.unreachable;
+    rep.colliding += o.colliding;
+    out.insert(out.end(), o.views.begin(), o.views.end());
+  }
+  return out;
+}
+
+}  // namespace
+
 std::vector<Viewpoint> cell_viewpoints(const RoughModel& rough, const std::vector<Viewpoint>& seeds,
                                        const SensorModel& sensor, const ModelSpec& spec,
                                        const ViewpointSettings& st, const CellModel& cell,
@@ -149,80 +231,48 @@ std::vector<Viewpoint> cell_viewpoints(const RoughModel& rough, const std::vecto
     if (report) *report = rep;
     return out;
   }
-  // One seed per optimal-zone position: the untilted, first-twist free candidate of each target row.
-  std::vector<const Viewpoint*> positions;
+  // One seed per optimal-zone position: the untilted, first-twist free candidate of each target row, aimed at
+  // the row with its stand-off.
+  std::vector<AimPoint> aims;
   {
     std::map<std::int32_t, const Viewpoint*> by_row;
     for (const auto& v : seeds)
       if (v.target_row >= 0 && v.tilt_rad == 0.0) by_row.emplace(v.target_row, &v);
-    for (const auto& [row, v] : by_row) positions.push_back(v);
+    for (const auto& [row, v] : by_row)
+      aims.push_back({rough.points[static_cast<std::uint32_t>(row)], rough.normals[static_cast<std::uint32_t>(row)], v->standoff_mm, row});
   }
-  rep.seeds = positions.size();
-  const Eigen::Matrix3d object_to_table = cell.object_on_table.linear();
-  const Eigen::Matrix3d table_to_object = object_to_table.transpose();
-  const double elev_max = max_elevation(cell);
-  const double range_cap = std::min(sensor.range_max_mm, max_range_for_precision_mm(sensor, spec));
+  rep.seeds = aims.size();
+  std::vector<Viewpoint> out = turntable_viewpoints(aims, sensor, spec, st, cell, checker, rep);
+  rep.candidates = out.size();
+  if (report) *report = rep;
+  return out;
+}
 
-  struct Out {
-    std::vector<Viewpoint> views;
-    std::size_t clamped = 0, stepped_back = 0, unreachable = 0, colliding = 0;
-  };
-  std::vector<Out> per(positions.size());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, positions.size(), 8), [&](const auto& range) {
-    for (std::size_t k = range.begin(); k != range.end(); ++k) {
-      const Viewpoint& seed = *positions[k];
-      const auto row = static_cast<std::uint32_t>(seed.target_row);
-      const Eigen::Vector3d target = rough.points[row];
-      Eigen::Vector3d b0 = object_to_table * (-rough.normals[row]);
-      const double elev0 = std::asin(std::clamp(b0.z(), -1.0, 1.0));
-      Out& o = per[k];
-      const double elev_c = std::clamp(elev0, -elev_max, elev_max);
-      if (elev_c != elev0) {
-        ++o.clamped;
-        // A face steeper than the tilt allows says little about the azimuth to view it from; look inwards
-        // from the rim side, where the radial axis has the most room (it cannot reach over the table's centre).
-        const Eigen::Vector3d p_table = cell.object_on_table * target;
-        if (p_table.head<2>().norm() > 1e-6) b0.head<2>() = -p_table.head<2>().normalized() * b0.head<2>().norm();
-      }
-      // The oblique pair: the elevation raised and lowered, both inside the tilt range (one side twice as far
-      // when the other would leave it).
-      double up = elev_c + st.cell_oblique_rad, down = elev_c - st.cell_oblique_rad;
-      if (up > elev_max) up = elev_c - 2.0 * st.cell_oblique_rad;
-      if (down < -elev_max) down = elev_c + 2.0 * st.cell_oblique_rad;
-      // (elevation, yaw sign): the thesis' view, the bisector pair, the two oblique views.
-      const std::pair<double, int> variants[] = {{elev_c, 0}, {elev_c, 1}, {elev_c, -1}, {up, 0}, {down, 0}};
-      int variant = 0;
-      for (const auto& [elev_raw, yaw_sign] : variants) {
-        const double elev = std::clamp(elev_raw, -elev_max, elev_max);
-        bool reachable = false;
-        // The bisector's yaw is half the triangulation angle at the stand-off tried.
-        auto yaw_at = [&](double standoff) { return yaw_sign * 0.5 * std::atan2(sensor.baseline_mm, standoff); };
-        const auto placed = first_clear_standoff(
-            cell, checker, target, seed.standoff_mm, range_cap, st.cell_standoff_steps,
-            [&](double standoff) { return cell_frame(aim(b0, elev, yaw_at(standoff)), table_to_object); },
-            [&](double standoff, int) { return design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad); },
-            reachable);
-        const bool kept = placed.has_value();
-        if (kept) {
-          Viewpoint v = placed->view;
-          v.target_row = seed.target_row;
-          v.twist_level = variant;
-          v.tilt_rad = yaw_at(v.standoff_mm);
-          o.views.push_back(v);
-          o.stepped_back += placed->step > 0;
-        }
-        if (!kept) ++(reachable ? o.colliding : o.unreachable);
-        ++variant;
-      }
-    }
-  });
+std::vector<Viewpoint> cell_viewpoints_at(const std::vector<AimPoint>& aims, const SensorModel& sensor, const ModelSpec& spec,
+                                          const ViewpointSettings& st, const CellModel& cell, const CollisionChecker& checker,
+                                          CellGenerationReport* report) {
+  CellGenerationReport rep;
+  rep.seeds = aims.size();
   std::vector<Viewpoint> out;
-  for (auto& o : per) {
-    rep.clamped += o.clamped;
-    rep.stepped_back += o.stepped_back;
-    rep.unreachable += o.unreachable;
-    rep.colliding += o.colliding;
-    out.insert(out.end(), o.views.begin(), o.views.end());
+  if (cell.kinematics == CellKinematics::arm_turntable) {
+    // The arm takes any twist: the free views along each normal, every twist level, then stepped back or
+    // lowered where the arm needs it (arm_viewpoints).
+    std::vector<Viewpoint> free;
+    for (const auto& a : aims)
+      for (int level = 0; level < std::max(1, st.twist_levels); ++level) {
+        Viewpoint v;
+        v.position = a.point + a.standoff_mm * a.normal;
+        v.axis = -a.normal;
+        v.twist_rad = 2.0 * std::numbers::pi * level / std::max(1, st.twist_levels);
+        v.standoff_mm = a.standoff_mm;
+        v.scan_length_mm = design_scan_length_mm(sensor, spec, a.standoff_mm, st.scan_length_design_incidence_rad);
+        v.target_row = a.row;
+        v.twist_level = level;
+        free.push_back(v);
+      }
+    out = arm_viewpoints(free, sensor, spec, st, cell, checker, rep);
+  } else if (cell.kinematics == CellKinematics::turntable_lift_tilt) {
+    out = turntable_viewpoints(aims, sensor, spec, st, cell, checker, rep);
   }
   rep.candidates = out.size();
   if (report) *report = rep;

@@ -39,6 +39,15 @@ struct CellGenerationReport {
   std::size_t stepped_back = 0;  // kept at a longer stand-off to clear the object or the plate
   std::size_t unreachable = 0;   // no twist sign the axes reach
   std::size_t colliding = 0;     // collides at every stand-off tried
+  std::size_t footprint_aims = 0, footprint_candidates = 0;  // replans: points aimed at what open rows lack, views kept
+};
+
+/// A surface point to aim views at: where (object frame, mm), its outward unit normal, the stand-off to start
+/// from, and the row the views are credited to (Viewpoint::target_row).
+struct AimPoint {
+  Eigen::Vector3d point, normal;
+  double standoff_mm = 0.0;
+  std::int32_t row = -1;
 };
 
 /// Whether `cell` gets cell-native candidates (turntable_lift_tilt, arm_turntable); others project free ones.
@@ -51,5 +60,13 @@ std::vector<Viewpoint> cell_viewpoints(const RoughModel& rough, const std::vecto
                                        const SensorModel& sensor, const ModelSpec& spec,
                                        const ViewpointSettings& settings, const CellModel& cell,
                                        const CollisionChecker& checker, CellGenerationReport* report = nullptr);
+
+/// Cell-native candidates aimed at `aims` rather than at optimal-zone positions (a replan aims at what open
+/// rows lack: planner/core/footprint.hpp): on turntable_lift_tilt each aim's five views as above; on
+/// arm_turntable the free views along each normal at every twist level, stepped back or lowered as above.
+/// Other cells: none. Deterministic; parallel over the aims.
+std::vector<Viewpoint> cell_viewpoints_at(const std::vector<AimPoint>& aims, const SensorModel& sensor, const ModelSpec& spec,
+                                          const ViewpointSettings& settings, const CellModel& cell,
+                                          const CollisionChecker& checker, CellGenerationReport* report = nullptr);
 
 }  // namespace scancell::planner

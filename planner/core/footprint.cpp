@@ -24,6 +24,23 @@ void RowFootprints::validate(std::uint32_t n_rows) const {
   }
 }
 
+std::vector<AimPoint> footprint_aims(const RowFootprints& f, double standoff_mm) {
+  std::vector<AimPoint> out;
+  for (std::size_t k = 0; k < f.rows.size(); ++k) {
+    const std::uint32_t b = f.first[k], e = f.first[k + 1];
+    if (b == e) continue;
+    Eigen::Vector3d middle = Eigen::Vector3d::Zero();
+    for (std::uint32_t s = b; s < e; ++s) middle += f.points[s];
+    middle /= static_cast<double>(e - b);
+    std::uint32_t best = b;
+    for (std::uint32_t s = b + 1; s < e; ++s)
+      if ((f.points[s] - middle).squaredNorm() < (f.points[best] - middle).squaredNorm()) best = s;
+    if (!(f.normals[best].squaredNorm() > 0.5)) continue;  // no surface direction to aim along
+    out.push_back({f.points[best], f.normals[best], standoff_mm, static_cast<std::int32_t>(f.rows[k])});
+  }
+  return out;
+}
+
 SampleCover cover_by_samples(const MeasurabilityMatrix& matrix, const std::vector<double>& row_weight, const RowFootprints& f,
                              const OcclusionScene& scene, const SensorModel& sensor, const ModelSpec& spec,
                              const std::vector<Viewpoint>& candidates, const MatrixSettings& settings, double mean_edge_mm,

@@ -12,6 +12,7 @@
 
 #include <Eigen/Core>
 
+#include "planner/core/cell_viewpoints.hpp"
 #include "planner/core/measurability.hpp"
 
 namespace scancell::planner {
@@ -39,6 +40,11 @@ struct SampleCover {
   std::uint32_t n_rows = 0;    // the rough model's rows
   std::vector<std::uint32_t> owner;  // per sample: its entry in the footprints (not the row itself)
 };
+
+/// Where a replan aims views at what each footprint row lacks (cell_viewpoints_at): the sample nearest the
+/// middle of the row's samples, a point on the surface with that surface's normal, at `standoff_mm`, credited
+/// to the row. One per row with samples; `f` is taken as validated.
+std::vector<AimPoint> footprint_aims(const RowFootprints& f, double standoff_mm);
 
 SampleCover cover_by_samples(const MeasurabilityMatrix& matrix, const std::vector<double>& row_weight, const RowFootprints& footprints,
                              const OcclusionScene& scene, const SensorModel& sensor, const ModelSpec& spec,

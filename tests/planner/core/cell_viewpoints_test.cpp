@@ -91,6 +91,32 @@ TEST(CellViewpoints, TheBisectorPairStraddlesAWallsNormalByHalfTheTriangulationA
   EXPECT_GT(pairs, 5u);
 }
 
+// A replan's aim points (footprint_aims): views aimed at a point that is no rough-model row, along its own
+// normal, each reachable and clear, the aim on its boresight at its stand-off, the row credited; the first
+// (the thesis' view) looks straight along the wall's normal.
+TEST(CellViewpoints, AViewAimedAtAPointOffTheRowsLooksAtItAlongItsOwnNormal) {
+  BoxOnPlate b;
+  const sp::AimPoint a{{50.0, 17.0, 31.0}, {1.0, 0.0, 0.0}, 1.02 * b.sensor.optimal_standoff_mm, 7};
+  const sp::CollisionChecker checker(b.cell, b.rough.mesh());
+  sp::CellGenerationReport rep;
+  const auto views = sp::cell_viewpoints_at({a}, b.sensor, b.spec, b.settings, b.cell, checker, &rep);
+  ASSERT_GE(views.size(), 3u);
+  EXPECT_LE(views.size(), 5u);
+  EXPECT_EQ(rep.seeds, 1u);
+  EXPECT_EQ(rep.candidates, views.size());
+  for (const auto& v : views) {
+    EXPECT_EQ(v.target_row, 7);
+    const auto ik = sp::inverse_kinematics(b.cell, b.pose(v), v.scan_length_mm);
+    ASSERT_TRUE(ik.ok) << ik.why;
+    EXPECT_FALSE(checker.collides(b.pose(v), v.scan_length_mm));
+    EXPECT_GE(v.standoff_mm, a.standoff_mm - 1e-9);
+    EXPECT_NEAR((a.point - v.position).norm(), v.standoff_mm, 1e-9);
+    EXPECT_NEAR((a.point - v.position).normalized().dot(v.axis), 1.0, 1e-9);
+  }
+  ASSERT_EQ(views.front().twist_level, 0);
+  EXPECT_NEAR(views.front().axis.dot(-a.normal), 1.0, 1e-9);
+}
+
 // arm_turntable: the wrist takes any twist, so a free candidate is kept as it is where the arm reaches it
 // with the scanner body clear; where not, it steps back along its own boresight (same target, same
 // orientation, a longer stand-off) instead of being dropped as projection (thesis 6.3.2) drops it.

@@ -134,5 +134,28 @@ TEST(FootprintPrediction, InconsistentFootprintsAreRefusedByWhatIsWrong) {
   EXPECT_EQ(none.weight, weight);
 }
 
+// Where a replan aims at what a row lacks: the sample nearest the middle of the row's samples, with that
+// sample's own normal, the stand-off given and the row credited; a row without samples gives none.
+TEST(FootprintPrediction, AReplanAimsAtTheSampleNearestTheMiddleOfWhatARowLacks) {
+  RowFootprints f;
+  f.rows = {3, 5, 9};
+  f.first = {0, 3, 3, 5};  // row 5 has no sample left
+  f.points = {{0, 0, 0}, {1.2, 0, 0}, {3, 0, 0}, {0, 0, 10}, {0, 4, 10}};
+  f.normals = {{0, 0, 1}, {0, 1, 0}, {1, 0, 0}, {0, 0, -1}, {-1, 0, 0}};
+  f.needed = {2, 0, 1};
+  f.validate(10);
+  const std::vector<AimPoint> aims = footprint_aims(f, 144.84);
+  ASSERT_EQ(aims.size(), 2u);
+  // Row 3: the middle is (1.4, 0, 0); the sample at 1.2 is nearest (0.2 against 1.4 and 1.6).
+  EXPECT_EQ(aims[0].row, 3);
+  EXPECT_TRUE(aims[0].point.isApprox(Eigen::Vector3d(1.2, 0, 0)));
+  EXPECT_TRUE(aims[0].normal.isApprox(Eigen::Vector3d(0, 1, 0)));
+  EXPECT_DOUBLE_EQ(aims[0].standoff_mm, 144.84);
+  // Row 9: both samples lie 2 mm from the middle (0, 2, 10); the first is taken.
+  EXPECT_EQ(aims[1].row, 9);
+  EXPECT_TRUE(aims[1].point.isApprox(Eigen::Vector3d(0, 0, 10)));
+  EXPECT_TRUE(aims[1].normal.isApprox(Eigen::Vector3d(0, 0, -1)));
+}
+
 }  // namespace
 }  // namespace scancell::planner
