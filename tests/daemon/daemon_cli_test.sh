@@ -7,7 +7,7 @@ set -uo pipefail
 BUILD=$(cd "$1" && pwd)
 SRC=$(cd "$(dirname "$0")/../.." && pwd)
 W=$(mktemp -d /tmp/scancell_cli.XXXXXX)
-PORT=$((17500 + ($$ % 400) * 8))
+PORT=$((19400 + ($$ % 300) * 8))  # 19400-21796 (kill_loop.sh: blocks apart)
 LCM_PORT=$((7800 + $$ % 100))  # its own LCM port: other tests publish on the default one
 fail() { echo "FAIL: $*"; [ -f "$W/daemon.log" ] && tail -20 "$W/daemon.log"; exit 1; }
 . "$(dirname "$0")/sim_cell.sh"

@@ -10,7 +10,7 @@ set -euo pipefail
 BUILD=$(cd "$1" && pwd)
 SRC=$(cd "$(dirname "$0")/../.." && pwd)
 W=$(mktemp -d /tmp/scancell_setups.XXXXXX)
-PORT=$((19000 + ($$ % 500) * 8))
+PORT=$((21800 + ($$ % 300) * 8))  # 21800-24196 (kill_loop.sh: blocks apart)
 LCM_PORT=$((7700 + $$ % 100))  # its own LCM port: other tests publish on the default one
 SIM_PID=""
 DAEMON_PID=""

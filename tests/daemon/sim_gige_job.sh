@@ -9,7 +9,7 @@ set -uo pipefail
 BUILD=$(cd "$1" && pwd)
 SRC=$(cd "$(dirname "$0")/../.." && pwd)
 W=$(mktemp -d /tmp/scancell_gige.XXXXXX)
-PORT=$((18700 + ($$ % 300) * 8))
+PORT=$((24200 + ($$ % 300) * 8))  # 24200-26596 (kill_loop.sh: blocks apart)
 LCM_PORT=$((7900 + $$ % 100))
 fail() { echo "FAIL: $*"; [ -f "$W/daemon.log" ] && tail -20 "$W/daemon.log"; exit 1; }
 . "$(dirname "$0")/sim_cell.sh"

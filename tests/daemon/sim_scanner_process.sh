@@ -10,7 +10,7 @@ set -uo pipefail
 BUILD=$(cd "$1" && pwd)
 SRC=$(cd "$(dirname "$0")/../.." && pwd)
 W=$(mktemp -d /tmp/scancell_scanner.XXXXXX)
-PORT=$((19300 + ($$ % 300) * 8))
+PORT=$((26600 + ($$ % 300) * 8))  # 26600-28996 (kill_loop.sh: blocks apart)
 LCM_PORT=$((7600 + $$ % 100))
 SCANNER_PID=
 fail() { echo "FAIL: $*"; for f in daemon.log scanner.log; do [ -f "$W/$f" ] && { echo "--- $f"; tail -20 "$W/$f"; }; done; exit 1; }
