@@ -370,7 +370,10 @@ std::optional<JobState> JobRunner::close_or_replan(Job& j, std::int64_t plan, co
                                      " mm2 it predicted (under 20 %): the loop stops rather than repeat it; " + std::to_string(n_retired) +
                                      " rows (" + fmt(retired_area, 1) + " mm2) need attention: " + summary);
   }
-  return replan(j, measured_now, fails, retired, n_retired, open, summary, stop);
+  // A stall found while replanning names the retired rows too, as every stall above does.
+  const std::string stall_summary =
+      n_retired ? std::to_string(n_retired) + " rows (" + fmt(retired_area, 1) + " mm2) need attention: " + summary : summary;
+  return replan(j, measured_now, fails, retired, n_retired, open, stall_summary, stop);
 }
 
 /// The next round of the setup: a plan for the open rows (retired ones left out, failed ones down-weighted),
