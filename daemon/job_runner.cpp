@@ -344,11 +344,13 @@ std::optional<JobState> JobRunner::close_or_replan(Job& j, std::int64_t plan, co
   if (open == 0 && (guessed == 0 || j.round >= 1)) {
     return end_setup(j, JobState::done, "spec met: " + summary);
   }
+  // How the stalls below name the rows that need attention (all but the stop at jobs.max_rounds).
+  const std::string attention = std::to_string(n_retired) + " rows (" + fmt(retired_area, 1) + " mm2) need attention: ";
   std::size_t open_retired = 0;
   for (auto r : j.coverage->unmeasured_rows())
     open_retired += retired[r] && (j.rough->hypothetical.empty() || !j.rough->hypothetical[r]);
   if (open_retired == open && (guessed == 0 || j.round >= 1)) {
-    return end_setup(j, JobState::stalled, std::to_string(n_retired) + " rows (" + fmt(retired_area, 1) + " mm2) need attention: predicted measurable by " +
+    return end_setup(j, JobState::stalled, attention + "predicted measurable by " +
                                      std::to_string(settings_.retire_after_failures) +
                                      " rounds, or by a replanning round that realized under 20 % of its prediction, and not measured; " + summary);
   }
@@ -357,8 +359,7 @@ std::optional<JobState> JobRunner::close_or_replan(Job& j, std::int64_t plan, co
                                               (j.setup > 1 ? " of setup " + std::to_string(j.setup) : "") + ": " + summary);
   }
   if (j.round > 0 && j.progress.measured <= info.value("measured_before", 0.0) + 1e-9) {
-    return end_setup(j, JobState::stalled, "round " + std::to_string(j.round) + " measured nothing new; " + std::to_string(n_retired) +
-                                     " rows (" + fmt(retired_area, 1) + " mm2) need attention: " + summary);
+    return end_setup(j, JobState::stalled, "round " + std::to_string(j.round) + " measured nothing new; " + attention + summary);
   }
   // Issue 15: a replanning round that delivered under 20 % of its prediction is not repeated. The rows it
   // aimed at are not where, or not as, the rough model says, and the next plan would aim at them alike
@@ -367,13 +368,10 @@ std::optional<JobState> JobRunner::close_or_replan(Job& j, std::int64_t plan, co
     const json g = round_gains(infos, j.progress.measured, j.rough->total_area_mm2).back();
     return end_setup(j, JobState::stalled, "round " + std::to_string(j.round) + " realized " + fmt(g.at("realized_gain_mm2").get<double>(), 1) +
                                      " of the " + fmt(g.at("predicted_gain_mm2").get<double>(), 1) +
-                                     " mm2 it predicted (under 20 %): the loop stops rather than repeat it; " + std::to_string(n_retired) +
-                                     " rows (" + fmt(retired_area, 1) + " mm2) need attention: " + summary);
+                                     " mm2 it predicted (under 20 %): the loop stops rather than repeat it; " + attention + summary);
   }
-  // A stall found while replanning names the retired rows too, as every stall above does.
-  const std::string stall_summary =
-      n_retired ? std::to_string(n_retired) + " rows (" + fmt(retired_area, 1) + " mm2) need attention: " + summary : summary;
-  return replan(j, measured_now, fails, retired, n_retired, open, stall_summary, stop);
+  // A stall found while replanning names them too.
+  return replan(j, measured_now, fails, retired, n_retired, open, attention + summary, stop);
 }
 
 /// The next round of the setup: a plan for the open rows (retired ones left out, failed ones down-weighted),
