@@ -7,7 +7,14 @@
 //
 //   bench_loop [--meshes DIR] [--only a,b] [--rough-vertices N] [--refine-mm E] [--max-rounds N]
 //              [--placement auto|as_given] [--row-fraction F] [--normal-tolerance-mm T] [--footprint-samples K]
-//              [--oracle-decimation K] [--threads N] [--csv FILE] [--keep DIR]
+//              [--oracle-decimation K] [--threads N] [--csv FILE] [--keep DIR] [--planner FILE]
+//              [--min-gain-per-view-mm2 A] [--trigger drive_compare|daemon]
+//
+// --planner: planner settings other than config/planner/default.yaml; --min-gain-per-view-mm2: the replans'
+// jobs.min_gain_per_view_mm2 (default the daemon's); --trigger: what triggers the scanner, the daemon's polled
+// compare (default, scanner.trigger_source's: where profiles land, and with it later rounds, moves with the
+// machine's load, a few views from run to run) or the drive's position compare (the same views on every run:
+// for comparing two settings).
 //
 // Shared meshes are scaled to a longest side of 200 mm and their edges refined to E mm (3): the fine model,
 // which is both what the job is given and the object on the table (a job's rough model is made from it at
@@ -85,6 +92,9 @@ struct Options {
   double refine_mm = 3.0;
   sp::CoverageOptions coverage;  // jobs.row_fraction, jobs.normal_tolerance_mm
   std::string placement;         // auto | as_given; empty: the shipped settings' placement.mode
+  std::string planner_path = std::string(SCANCELL_SOURCE_DIR) + "/config/planner/default.yaml";
+  double min_gain_per_view_mm2 = dm::JobSettings{}.min_gain_per_view_mm2;
+  bool drive_compare = false;  // --trigger daemon (the daemon's default; views vary with load) | drive_compare (the same views on every run)
 };
 
 /// The options, or nothing after printing the usage (an unknown option or a bad --placement).
@@ -105,13 +115,23 @@ std::optional<Options> parse_options(int argc, char** argv) {
     else if (a == "--normal-tolerance-mm") o.coverage.normal_tolerance_mm = std::stod(value());
     else if (a == "--row-fraction") o.coverage.row_fraction = std::stod(value());
     else if (a == "--footprint-samples") o.footprint_samples = std::stoi(value());
+    else if (a == "--planner") o.planner_path = value();
+    else if (a == "--trigger") {
+      const std::string t = value();
+      if (t != "drive_compare" && t != "daemon") {
+        std::cerr << "--trigger: drive_compare or daemon, not " << t << "\n";
+        return std::nullopt;
+      }
+      o.drive_compare = t == "drive_compare";
+    }
+    else if (a == "--min-gain-per-view-mm2") o.min_gain_per_view_mm2 = std::stod(value());
     else if (a == "--only") {
       std::stringstream ss(value());
       for (std::string t; std::getline(ss, t, ',');) o.only.insert(t);
     } else {
       std::cerr << "usage: bench_loop [--meshes DIR] [--only a,b] [--rough-vertices N] [--refine-mm E] [--max-rounds N] "
                    "[--placement auto|as_given] [--row-fraction F] [--normal-tolerance-mm T] [--footprint-samples K] [--oracle-decimation K] "
-                   "[--threads N] [--csv FILE] [--keep DIR]\n";
+                   "[--threads N] [--csv FILE] [--keep DIR] [--planner FILE] [--min-gain-per-view-mm2 A] [--trigger drive_compare|daemon]\n";
       return std::nullopt;
     }
   }
@@ -143,7 +163,7 @@ Rig make_rig(const Options& o) {
   }
   r.models.sensor = sp::load_sensor(root + "/config/sensors/line-scan-thesis.yaml");
   r.models.spec = sp::load_spec(root + "/config/spec/thesis.yaml");
-  r.models.settings = sp::load_planner_settings(root + "/config/planner/default.yaml");
+  r.models.settings = sp::load_planner_settings(o.planner_path);
   if (!o.placement.empty()) r.models.settings.placement.automatic = o.placement == "auto";
   r.work = o.keep_dir.empty() ? fs::temp_directory_path() / ("bench_loop_" + std::to_string(::getpid())) : fs::path(o.keep_dir);
   fs::create_directories(r.work);
@@ -161,6 +181,8 @@ std::int64_t run_job(Rig& rig, const Options& o, const fs::path& mesh_file) {
   s.max_rounds = o.max_rounds;
   s.coverage = o.coverage;
   s.footprint_samples = o.footprint_samples;
+  s.min_gain_per_view_mm2 = o.min_gain_per_view_mm2;
+  s.drive_compare = o.drive_compare;
   s.scan_speed_mm_s = 400.0;  // the demo's sweep (the real cell's 50 mm/s × the drives' factor)
   s.planner_threads = o.threads;
   s.next_setup_min_area_mm2 = 0.0;  // one setup: what this cell measures of the object as it lies
@@ -190,6 +212,9 @@ struct Judged {
   /// (oblique, into a bore) measure area outside its reach, which m_v of the reach leaves out.
   double analytic_mv = 0.0;
   double job_cell_time_s = 0.0;
+  /// At equal completeness: the oracle's greedy views to the job's m_v of the reach, and a greedy cover of
+  /// the job's own executed views to it (how many of them the job would have needed, had it known).
+  std::size_t oracle_views_to_loop = 0, own_views_to_loop = 0;
 };
 
 Judged judge(Rig& rig, const Options& o, std::int64_t job, const sp::TriangleMesh& fine_mesh, const std::string& name) {
@@ -224,6 +249,15 @@ Judged judge(Rig& rig, const Options& o, std::int64_t job, const sp::TriangleMes
     std::vector<std::uint32_t> order(all.size());
     for (std::uint32_t k = 0; k < order.size(); ++k) order[k] = k;
     j.analytic_mv = scancell::bench::progression(mm, order, fine.area_mm2, std::vector<std::uint8_t>(fine.size(), 1), fine.total_area_mm2).back();
+    std::vector<double> reach_area(fine.size(), 0.0);
+    for (std::size_t r = 0; r < fine.size(); ++r) reach_area[r] = j.oracle.reach[r] ? fine.area_mm2[r] : 0.0;
+    sp::CoverSettings cs;
+    cs.mode = sp::CoverMode::greedy;
+    cs.eliminate_redundant = false;
+    const auto own = sp::greedy_cover(mm, reach_area, cs);
+    const auto own_prog = scancell::bench::progression(mm, own.views, fine.area_mm2, j.oracle.reach, j.oracle.reach_area_mm2);
+    j.own_views_to_loop = scancell::bench::views_to(own_prog, j.loop);
+    j.oracle_views_to_loop = scancell::bench::views_to(j.oracle.progression, j.loop);
   }
   j.job_cell_time_s = scancell::bench::cell_time_s(placed, all);
   j.fine_rows = fine.size();
@@ -246,7 +280,8 @@ int main(int argc, char** argv) {
     csv.open(o.csv_path);
     csv << "object,fine_vertices,reachable,oracle_views_95,oracle_views_99,oracle_views_99.9,end,rounds,round_views,"
            "single_shot_m_v_reachable,loop_m_v_reachable,loop_views,loop_over_oracle_99,verified_mv,verified_mv_reachable,analytic_mv,"
-           "round_gains_predicted_realized_mm2,rounds_under_20_percent,needs_attention_area_mm2,job_cell_time_s,oracle_cell_time_s,wall_s\n";
+           "round_gains_predicted_realized_mm2,rounds_under_20_percent,needs_attention_area_mm2,job_cell_time_s,oracle_cell_time_s,"
+           "oracle_views_to_loop_m_v,own_views_to_loop_m_v,wall_s\n";
   }
   std::printf("closed loop on turntable-lift-tilt, placement %s, %zu rough rows, max_rounds %d, oracle 1 per %d fine vertices, %d threads\n",
               rig.models.settings.placement.automatic ? "auto" : "as_given", o.rough_vertices, o.max_rounds, o.oracle_decimation, o.threads);
@@ -279,11 +314,12 @@ int main(int argc, char** argv) {
       gains += (gains.empty() ? "" : " ") + std::to_string(g.value("views", 0)) + ":" +
                std::to_string(std::lround(g.value("predicted_gain_mm2", 0.0))) + "/" +
                std::to_string(std::lround(g.value("realized_gain_mm2", 0.0)));
-    std::printf("%-16s %6zu %6.3f %4zu/%4zu/%4zu %-8s %-18s %8.4f %8.4f %6zu %6.2f %8.4f %8.4f %8.4f %9.0f %9.0f %7.0f  gains %s, weak rounds %s, "
-                "needs attention %.0f mm2: %s\n",
+    std::printf("%-16s %6zu %6.3f %4zu/%4zu/%4zu %-8s %-18s %8.4f %8.4f %6zu %6.2f %8.4f %8.4f %8.4f %9.0f %9.0f %7.0f  to the job's m_v: oracle %zu views, "
+                "the job's own %zu; gains %s, weak rounds %s, needs attention %.0f mm2: %s\n",
                 obj.name.c_str(), j.fine_rows, oracle.reachable(), oracle.views_95, oracle.views_99, oracle.views_999,
                 dm::to_string(rec.state), per_round.c_str(), j.single, j.loop, j.views, ratio, verified,
-                verified / oracle.reachable(), j.analytic_mv, j.job_cell_time_s, oracle.cell_time_s, wall, gains.c_str(), weak.c_str(), attention,
+                verified / oracle.reachable(), j.analytic_mv, j.job_cell_time_s, oracle.cell_time_s, wall, j.oracle_views_to_loop,
+                j.own_views_to_loop, gains.c_str(), weak.c_str(), attention,
                 rec.cause.c_str());
     std::fflush(stdout);
     if (csv)
@@ -291,7 +327,8 @@ int main(int argc, char** argv) {
           << ',' << oracle.views_999 << ',' << dm::to_string(rec.state) << ',' << j.rounds.size() << ',' << per_round << ','
           << j.single << ',' << j.loop << ',' << j.views << ',' << ratio << ',' << verified << ','
           << verified / oracle.reachable() << ',' << j.analytic_mv << ',' << gains << ',' << '"' << weak << '"' << ',' << attention << ','
-          << j.job_cell_time_s << ',' << oracle.cell_time_s << ',' << wall << '\n';
+          << j.job_cell_time_s << ',' << oracle.cell_time_s << ',' << j.oracle_views_to_loop << ',' << j.own_views_to_loop << ','
+          << wall << '\n';
   }
   if (o.keep_dir.empty()) fs::remove_all(rig.work);
   return 0;

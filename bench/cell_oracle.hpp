@@ -131,6 +131,7 @@ struct CellOracle {
   double reach_area_mm2 = 0.0, total_area_mm2 = 0.0;
   double lost_range = 0.0, lost_plate = 0.0, lost_axes = 0.0, lost_collision = 0.0;
   std::size_t views_95 = 0, views_99 = 0, views_999 = 0;  // greedy views to 95/99/99.9 % of the reach
+  std::vector<double> progression;                         // share of the reach after each greedy view
   double cell_time_s = std::nan("");                       // its views to 99 %, travel-ordered (cells only)
   double reachable() const { return total_area_mm2 > 0 ? reach_area_mm2 / total_area_mm2 : 0.0; }
 };
@@ -213,6 +214,7 @@ inline CellOracle cell_oracle(const sp::TriangleMesh& fine_mesh, const sp::Rough
   o.views_95 = views_to(oprog, 0.95);
   o.views_99 = views_to(oprog, 0.99);
   o.views_999 = views_to(oprog, 0.999);
+  o.progression = oprog;
   if (cell) {
     std::vector<sp::Viewpoint> ov;
     for (std::size_t k = 0; k < std::min<std::size_t>(o.views_99 ? o.views_99 : oc.views.size(), oc.views.size()); ++k)

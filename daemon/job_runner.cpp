@@ -344,7 +344,7 @@ std::optional<JobState> JobRunner::close_or_replan(Job& j, std::int64_t plan, co
   if (open == 0 && (guessed == 0 || j.round >= 1)) {
     return end_setup(j, JobState::done, "spec met: " + summary);
   }
-  // How the stalls below name the rows that need attention (all but the stop at jobs.max_rounds).
+  // How the stalls below name the rows that need attention.
   const std::string attention = std::to_string(n_retired) + " rows (" + fmt(retired_area, 1) + " mm2) need attention: ";
   std::size_t open_retired = 0;
   for (auto r : j.coverage->unmeasured_rows())
@@ -356,7 +356,7 @@ std::optional<JobState> JobRunner::close_or_replan(Job& j, std::int64_t plan, co
   }
   if (j.round - j.setup_first_round + 1 >= settings_.max_rounds) {
     return end_setup(j, JobState::stalled, "after " + std::to_string(j.round - j.setup_first_round + 1) + " rounds" +
-                                              (j.setup > 1 ? " of setup " + std::to_string(j.setup) : "") + ": " + summary);
+                                              (j.setup > 1 ? " of setup " + std::to_string(j.setup) : "") + ": " + attention + summary);
   }
   if (j.round > 0 && j.progress.measured <= info.value("measured_before", 0.0) + 1e-9) {
     return end_setup(j, JobState::stalled, "round " + std::to_string(j.round) + " measured nothing new; " + attention + summary);

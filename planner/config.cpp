@@ -221,6 +221,7 @@ void read_placement(Section s, PlacementSettings& pl) {
 
 void read_matrix(Section m, PlannerSettings& p) {
   p.matrix.ray_offset_mm = m.non_negative("ray_offset_mm", p.matrix.ray_offset_mm);
+  p.cell_footprint_samples = m.ranged("cell_footprint_samples", p.cell_footprint_samples, 0, 64);
   if (m.has("countermeasures")) {
     const YAML::Node n = m.raw("countermeasures");
     if (n.IsScalar()) {

@@ -4,6 +4,7 @@
 #include "planner/kinematics/resting_poses.hpp"
 
 #include "planner/core/cell_viewpoints.hpp"
+#include "planner/reconstruction/measured_coverage.hpp"
 #include "common/errors.hpp"
 
 #include <algorithm>
@@ -93,6 +94,7 @@ struct Stage {
   const std::atomic<int>* cancel;
   const CollisionChecker* checker;                   // with a cell
   const RowFootprints* footprints;                   // replans: what the open rows lack (footprint.hpp)
+  bool aim_at_footprints;                            // candidates aimed at what each footprint row lacks too
 };
 
 /// Free space: the margin against the rough model's own error (config.hpp), merged field by field, the larger.
@@ -234,7 +236,7 @@ std::vector<Viewpoint> make_candidates(const Stage& s, const OcclusionScene& sce
                                                     *s.checker, &p.cell_generation);
     fit_to_cell(s, segment_views);
     native.insert(native.end(), segment_views.begin(), segment_views.end());
-    if (s.footprints) {
+    if (s.footprints && s.aim_at_footprints) {
       // A replan also aims at what each open row lacks, not only at rough-model rows: the sample of its
       // unfilled cells nearest their middle, along that sample's normal (the cell oracle aims at fine
       // vertices so, and reaches rows no candidate of the optimal zone finishes).
@@ -474,6 +476,14 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
       p.settings.matrix.countermeasures = settings.matrix.countermeasures;
     }
     const std::vector<double> row_weight = row_weights(p.rough, measured_rows, row_weight_scale);
+    // A replan's footprints come with what the open rows lack (the caller's measured coverage); a single
+    // shot on a cell predicts every row by its whole footprint when matrix.cell_footprint_samples says so.
+    const bool replan_footprints = footprints != nullptr;
+    RowFootprints whole;
+    if (!footprints && p.cell && settings.cell_footprint_samples > 0 && !measured_rows) {
+      whole = whole_row_footprints(p.rough, spec, static_cast<std::size_t>(settings.cell_footprint_samples));
+      footprints = &whole;
+    }
     if (footprints) {
       footprints->validate(static_cast<std::uint32_t>(p.rough.size()));
       for (auto r : footprints->rows)
@@ -490,7 +500,9 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     t = Clock::now();
     std::unique_ptr<CollisionChecker> checker;
     if (p.cell) checker = std::make_unique<CollisionChecker>(*p.cell, p.rough.mesh());
-    const Stage stage{p, sensor, spec, settings, measured_rows, cancel, checker.get(), footprints};
+    // Candidates aimed at each footprint row's middle are a replan's (a few hundred open rows): for every row
+    // of a single shot they are five more per row, and 13-14 s more of plan for 5k rows (docs/quality.md).
+    const Stage stage{p, sensor, spec, settings, measured_rows, cancel, checker.get(), footprints, replan_footprints};
     std::vector<Viewpoint> candidates = make_candidates(stage, scene);
     p.candidates = candidates.size();
     p.times.viewpoints_s = seconds_since(t);
@@ -577,7 +589,7 @@ json settings_json(const ViewPlan& p) {
                 {"local_search_iterations", p.settings.cover.local_search_iterations},
                 {"local_search_stall_work", p.settings.cover.local_search_stall_work},
                 {"local_search_time_limit_s", p.settings.cover.local_search_time_limit_s}}},
-              {"matrix", {{"ray_offset_mm", p.settings.matrix.ray_offset_mm}}}};
+              {"matrix", {{"ray_offset_mm", p.settings.matrix.ray_offset_mm}, {"cell_footprint_samples", p.settings.cell_footprint_samples}}}};
   {
     const Countermeasures& cm = p.settings.matrix.countermeasures;
     out["matrix"]["countermeasures"] = {{"frustum_detune", cm.frustum_detune},

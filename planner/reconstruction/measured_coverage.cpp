@@ -237,4 +237,11 @@ double MeasuredCoverage::coverage() const {
   return total_area_ > 0.0 ? a / total_area_ : 0.0;
 }
 
+RowFootprints whole_row_footprints(const RoughModel& rough, const ModelSpec& spec, std::size_t max_samples, CoverageOptions options) {
+  const MeasuredCoverage coverage(rough, spec, options);
+  std::vector<std::uint32_t> all(rough.size());
+  for (std::uint32_t r = 0; r < all.size(); ++r) all[r] = r;
+  return coverage.open_footprints(all, max_samples);
+}
+
 }  // namespace scancell::planner

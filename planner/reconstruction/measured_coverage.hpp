@@ -67,4 +67,8 @@ class MeasuredCoverage {
   std::vector<std::pair<std::uint64_t, std::uint32_t>> row_grid_;
 };
 
+/// Every row's whole footprint (nothing measured yet), as a single shot predicts rows by
+/// (PlannerSettings::cell_footprint_samples): MeasuredCoverage(rough, spec, options).open_footprints of all rows.
+RowFootprints whole_row_footprints(const RoughModel& rough, const ModelSpec& spec, std::size_t max_samples, CoverageOptions options = {});
+
 }  // namespace scancell::planner

@@ -121,6 +121,15 @@ TEST(Config, MissingFileAndBadPlannerSettings) {
   }
   std::ofstream(p) << "cover:\n  mode: exhaustive\n";
   EXPECT_THROW(load_planner_settings(p), ConfigError);
+  std::ofstream(p) << "matrix:\n  cell_footprint_samples: 65\n";
+  try {
+    load_planner_settings(p);
+    ADD_FAILURE() << "accepted cell_footprint_samples 65";
+  } catch (const ConfigError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("matrix.cell_footprint_samples: must be in [0, 64], got 65"));
+  }
+  std::ofstream(p) << "matrix:\n  cell_footprint_samples: 8\n";
+  EXPECT_EQ(load_planner_settings(p).cell_footprint_samples, 8);
   // placement: the limits declared once (PlacementSettings) are what the loader refuses with.
   std::ofstream(p) << "placement:\n  mode: auto\n  candidates: 30\n";
   try {
