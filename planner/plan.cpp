@@ -94,7 +94,6 @@ struct Stage {
   const std::atomic<int>* cancel;
   const CollisionChecker* checker;                   // with a cell
   const RowFootprints* footprints;                   // replans: what the open rows lack (footprint.hpp)
-  bool aim_at_footprints;                            // candidates aimed at what each footprint row lacks too
 };
 
 /// Free space: the margin against the rough model's own error (config.hpp), merged field by field, the larger.
@@ -236,7 +235,7 @@ std::vector<Viewpoint> make_candidates(const Stage& s, const OcclusionScene& sce
                                                     *s.checker, &p.cell_generation);
     fit_to_cell(s, segment_views);
     native.insert(native.end(), segment_views.begin(), segment_views.end());
-    if (s.footprints && s.aim_at_footprints) {
+    if (s.footprints) {
       // A replan also aims at what each open row lacks, not only at rough-model rows: the sample of its
       // unfilled cells nearest their middle, along that sample's normal (the cell oracle aims at fine
       // vertices so, and reaches rows no candidate of the optimal zone finishes).
@@ -476,13 +475,15 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
       p.settings.matrix.countermeasures = settings.matrix.countermeasures;
     }
     const std::vector<double> row_weight = row_weights(p.rough, measured_rows, row_weight_scale);
-    // A replan's footprints come with what the open rows lack (the caller's measured coverage); a single
-    // shot on a cell predicts every row by its whole footprint when matrix.cell_footprint_samples says so.
-    const bool replan_footprints = footprints != nullptr;
+    // The rows predicted by footprint samples: a replan's open rows, by what they lack (the caller's measured
+    // coverage); or, in a single shot on a cell when matrix.cell_footprint_samples says so, every row by its
+    // whole footprint. Only a replan's also get candidates aimed at them (the stage's `footprints`): for every
+    // row of a single shot those are five more per row, and 13-14 s more of plan for 5k rows (docs/quality.md).
     RowFootprints whole;
+    const RowFootprints* predicted_by = footprints;
     if (!footprints && p.cell && settings.cell_footprint_samples > 0 && !measured_rows) {
       whole = whole_row_footprints(p.rough, spec, static_cast<std::size_t>(settings.cell_footprint_samples));
-      footprints = &whole;
+      predicted_by = &whole;
     }
     if (footprints) {
       footprints->validate(static_cast<std::uint32_t>(p.rough.size()));
@@ -500,9 +501,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     t = Clock::now();
     std::unique_ptr<CollisionChecker> checker;
     if (p.cell) checker = std::make_unique<CollisionChecker>(*p.cell, p.rough.mesh());
-    // Candidates aimed at each footprint row's middle are a replan's (a few hundred open rows): for every row
-    // of a single shot they are five more per row, and 13-14 s more of plan for 5k rows (docs/quality.md).
-    const Stage stage{p, sensor, spec, settings, measured_rows, cancel, checker.get(), footprints, replan_footprints};
+    const Stage stage{p, sensor, spec, settings, measured_rows, cancel, checker.get(), footprints};
     std::vector<Viewpoint> candidates = make_candidates(stage, scene);
     p.candidates = candidates.size();
     p.times.viewpoints_s = seconds_since(t);
@@ -511,8 +510,8 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     t = Clock::now();
     const MeasurabilityMatrix matrix = make_matrix(stage, scene, settings_in.matrix.countermeasures, candidates);
     std::optional<SampleCover> samples;
-    if (footprints) {
-      samples = cover_by_samples(matrix, row_weight, *footprints, scene, sensor, spec, candidates, settings.matrix,
+    if (predicted_by) {
+      samples = cover_by_samples(matrix, row_weight, *predicted_by, scene, sensor, spec, candidates, settings.matrix,
                                  p.rough.mean_edge_mm, cancel);
     }
     p.candidates = candidates.size();
@@ -526,7 +525,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     check("the axis targets");
     if (samples) {
       choose_cover(p, samples->matrix, samples->weight, candidates, q_of);
-      record_views_by_samples(p, *samples, *footprints, candidates, measured_rows);
+      record_views_by_samples(p, *samples, *predicted_by, candidates, measured_rows);
     } else {
       choose_cover(p, matrix, row_weight, candidates, q_of);
       record_views(p, matrix, candidates, measured_rows);
