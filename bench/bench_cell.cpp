@@ -91,6 +91,7 @@ struct Row {
   std::string cell_name;
   std::size_t fine_vertices = 0, candidates = 0, views = 0, plan99 = 0;
   double reach = 0.0, cand_reach = 0.0, mv = 0.0, ratio = 0.0, plan_s = 0.0, plan_t = 0.0, est = 0.0;
+  sp::StageTimes stages;  // the plan's own stage times (plan_s is their sum and what lies between)
   bench::CellOracle oracle;
 };
 
@@ -124,6 +125,7 @@ Row judge(const sp::TriangleMesh& fine_mesh, const std::optional<sp::CellModel>&
   const auto t0 = Clock::now();
   const sp::ViewPlan plan = sp::plan_views(fine_mesh, sensor, spec, settings, ro, n_threads, cell ? &*cell : nullptr);
   row.plan_s = scancell::seconds_since(t0);
+  row.stages = plan.times;
   // The fine mesh's rows, in the plan's object frame, with the plate.
   const sp::RoughModel fine = sp::make_rough_model(fine_mesh);
   sp::TriangleMesh scene_mesh = fine.mesh();
@@ -151,10 +153,12 @@ Row judge(const sp::TriangleMesh& fine_mesh, const std::optional<sp::CellModel>&
 void print_row(const std::string& object, const Row& r) {
   const bench::CellOracle& c = r.oracle;
   std::printf("%-16s %-20s %6zu %6.3f %4zu/%4zu/%4zu %6zu %6zu %8.4f %8.4f %6.2f %7.1f %10.0f %10.0f  est %.4f  plan_to_99 %zu  "
-              "lost: range/incidence %.4f plate %.4f axes %.4f collision %.4f\n",
+              "lost: range/incidence %.4f plate %.4f axes %.4f collision %.4f  "
+              "stages s: rough %.2f viewpoints %.2f matrix %.2f cover %.2f\n",
               object.c_str(), r.cell_name.c_str(), r.fine_vertices, r.reach, c.views_95, c.views_99, c.views_999, r.candidates,
               r.views, r.cand_reach, r.mv, r.ratio, r.plan_s, r.plan_t, c.cell_time_s, r.est, r.plan99, c.lost_range,
-              c.lost_plate, c.lost_axes, c.lost_collision);
+              c.lost_plate, c.lost_axes, c.lost_collision, r.stages.rough_model_s, r.stages.viewpoints_s, r.stages.matrix_s,
+              r.stages.cover_s);
   std::fflush(stdout);
 }
 

@@ -2,7 +2,11 @@
 #include <filesystem>
 #include <fstream>
 
+#include <algorithm>
+#include <array>
 #include <chrono>
+#include <map>
+#include <set>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -10,6 +14,7 @@
 #include "common/errors.hpp"
 #include "planner/geometry/mesh.hpp"
 #include "planner/core/rough_model.hpp"
+#include "planner/sim/synthetic.hpp"
 #include "test_meshes.hpp"
 
 namespace scancell::planner {
@@ -184,6 +189,73 @@ TEST(RoughModel, DecimatesToTargetAndRhoRel) {
   EXPECT_NEAR(static_cast<double>(rm2.size()), m.vertices.size() / 4.0, 1.0);
   // Decimation keeps the surface: area within a few percent.
   EXPECT_NEAR(rm.total_area_mm2 / make_rough_model(m).total_area_mm2, 1.0, 0.05);
+}
+
+/// Euler characteristic V - E + F of a triangle mesh, and whether every edge has one or two triangles, no
+/// triangle is repeated and every vertex on the rim has two rim edges (what an edge collapse that breaks the
+/// link condition or pinches a rim would violate).
+struct Topology {
+  long euler = 0;
+  bool manifold_edges = true;
+  std::size_t boundary_edges = 0;
+};
+Topology topology(const TriangleMesh& m) {
+  std::map<std::pair<std::uint32_t, std::uint32_t>, int> edges;
+  std::set<std::array<std::uint32_t, 3>> faces;
+  Topology t;
+  for (const auto& f : m.triangles) {
+    std::array<std::uint32_t, 3> key = f;
+    std::sort(key.begin(), key.end());
+    t.manifold_edges &= faces.insert(key).second;
+    for (int k = 0; k < 3; ++k) ++edges[std::minmax(f[k], f[(k + 1) % 3])];
+  }
+  std::map<std::uint32_t, int> rim_edges_at;
+  for (const auto& [e, n] : edges) {
+    t.manifold_edges &= n <= 2;
+    t.boundary_edges += n == 1;
+    if (n == 1) ++rim_edges_at[e.first], ++rim_edges_at[e.second];
+  }
+  for (const auto& [v, n] : rim_edges_at) t.manifold_edges &= n == 2;
+  t.euler = static_cast<long>(m.vertices.size()) - static_cast<long>(edges.size()) + static_cast<long>(m.triangles.size());
+  return t;
+}
+
+/// A long rectangle a few rows wide, on z = 0: rim vertices on both sides of most edges.
+TriangleMesh strip(double length_mm, double width_mm, double step_mm) {
+  TriangleMesh m;
+  testing::add_grid(m, Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY(),
+                    static_cast<int>(std::lround(length_mm / step_mm)) + 1, static_cast<int>(std::lround(width_mm / step_mm)) + 1,
+                    step_mm);
+  return m;
+}
+
+TEST(RoughModel, DecimationKeepsTheTopology) {
+  // The decimater's collapse test (rough_model.cpp's own is_collapse_ok, in place of OpenMesh's) must refuse
+  // every collapse that would pinch the surface: a sphere stays a sphere (χ 2), a tube a torus (χ 0), an open
+  // patch a disc (χ 1) with its rim, each edge shared by at most two triangles; down to a few dozen vertices,
+  // where the link condition decides most collapses.
+  struct Case {
+    const char* name;
+    TriangleMesh mesh;
+    long euler;
+  };
+  const Case cases[] = {{"sphere", testing::uv_sphere(Eigen::Vector3d::Zero(), 50.0, 30, 60), 2},
+                        {"tube", cylinder_with_bore(80, 50, 50, 6.0), 0},
+                        {"patch", testing::flat_patch(60.0, 2.0), 1},
+                        {"strip", strip(200.0, 2.0, 2.0), 1}};
+  for (const auto& c : cases) {
+    ASSERT_EQ(topology(c.mesh).euler, c.euler) << c.name;
+    for (std::size_t target : {c.mesh.vertices.size() / 4, std::size_t{40}, std::size_t{12}}) {
+      RoughModelOptions o;
+      o.target_vertices = target;
+      const RoughModel rm = build_rough_model(c.mesh, o);
+      const Topology t = topology(TriangleMesh{rm.points, rm.triangles});
+      EXPECT_LE(rm.size(), std::max(target, c.mesh.vertices.size() / 4)) << c.name << " to " << target;
+      EXPECT_EQ(t.euler, c.euler) << c.name << " to " << target;
+      EXPECT_TRUE(t.manifold_edges) << c.name << " to " << target;
+      EXPECT_EQ(t.boundary_edges > 0, c.euler == 1) << c.name << " to " << target;
+    }
+  }
 }
 
 TEST(RoughModel, NormalNoiseIsSeededAndHasTheRequestedSigma) {
