@@ -10,8 +10,11 @@
 //
 // Oracle (shared/design/QUALITY-TARGETS.md): one view per K-th fine vertex (K = 4) along its normal at
 // f_d·R_o, scan length from the density spec; free space: 8 twists; on turntable_lift_tilt the one twist the
-// cell reaches (baseline along world +Y, camera on +X), tilt clamped to the tilt axis' range. Greedy cover.
-// The oracle ignores axis ranges other than the tilt and scanner-body collisions: an upper bound on reach.
+// cell reaches (baseline along world +Y, camera on +X), tilt clamped to the tilt axis' range; on a cell the
+// axes must reach it and the scanner body clear the object and the plate, stepped back when not. On a cell
+// the oracle is in the cell's own space (cell_oracle.hpp): the same aims also get the cell's other views of
+// the point that the plan's candidates are made of (bisector, oblique); the oracle along the normals alone
+// is reported beside it ("along normals"). Greedy cover.
 // Columns: views to 95/99/99.9 % of the oracle-reachable area; the plan's views, its m_v of that area, its
 // views over the oracle's to 99 %; cell time (moves + sweeps, travel-ordered) for both.
 #include <chrono>
@@ -92,7 +95,9 @@ struct Row {
   std::size_t fine_vertices = 0, candidates = 0, views = 0, plan99 = 0;
   double reach = 0.0, cand_reach = 0.0, mv = 0.0, ratio = 0.0, plan_s = 0.0, plan_t = 0.0, est = 0.0;
   sp::StageTimes stages;  // the plan's own stage times (plan_s is their sum and what lies between)
-  bench::CellOracle oracle;
+  bench::CellOracle oracle, along_normal;  // in the cell's own space; along the normals alone
+  double mv_normal = 0.0, ratio_normal = 0.0;  // the plan against `along_normal`
+  std::size_t oracle_to_plan = 0;              // the oracle's greedy views to the plan's m_v of its reach
 };
 
 /// The views of `plan` the fine model needs for 99 % of the oracle's reach, taken greedily (the rest of the
@@ -131,13 +136,20 @@ Row judge(const sp::TriangleMesh& fine_mesh, const std::optional<sp::CellModel>&
   sp::TriangleMesh scene_mesh = fine.mesh();
   if (plan.cell) sp::append_mesh(scene_mesh, sp::fixture_mesh(*plan.cell));
   const sp::OcclusionScene scene(scene_mesh);
-  row.oracle = bench::cell_oracle(fine_mesh, fine, scene, sensor, spec, plan.cell ? &*plan.cell : nullptr, o.oracle_decimation);
+  row.oracle = bench::cell_oracle(fine_mesh, fine, scene, sensor, spec, plan.cell ? &*plan.cell : nullptr, o.oracle_decimation,
+                                  &settings.viewpoints, &row.along_normal);
   const auto pm = sp::build_measurability(fine, scene, sensor, spec, plan.views);
   std::vector<std::uint32_t> all(plan.views.size());
   for (std::uint32_t k = 0; k < all.size(); ++k) all[k] = k;
-  const auto pprog = bench::progression(pm, all, fine.area_mm2, row.oracle.reach, row.oracle.reach_area_mm2);
-  row.mv = pprog.empty() ? 0.0 : pprog.back();
+  auto mv_of = [&](const bench::CellOracle& oracle) {
+    const auto prog = bench::progression(pm, all, fine.area_mm2, oracle.reach, oracle.reach_area_mm2);
+    return prog.empty() ? 0.0 : prog.back();
+  };
+  row.mv = mv_of(row.oracle);
+  row.mv_normal = mv_of(row.along_normal);
+  row.ratio_normal = row.along_normal.views_99 ? double(plan.views.size()) / row.along_normal.views_99 : std::nan("");
   row.plan99 = plan_views_to_99(pm, fine, row.oracle);
+  row.oracle_to_plan = bench::views_to(row.oracle.progression, row.mv);
   row.cand_reach = candidate_reach(sp::build_measurability(fine, scene, sensor, spec, plan.candidate_views), fine, row.oracle);
   row.est = plan.cover.cumulative_fraction.empty() ? 0.0 : plan.cover.cumulative_fraction.back();
   row.plan_t = plan.cell ? plan.cell_report.travel_s + plan.cell_report.scan_s : std::nan("");
@@ -154,11 +166,13 @@ void print_row(const std::string& object, const Row& r) {
   const bench::CellOracle& c = r.oracle;
   std::printf("%-16s %-20s %6zu %6.3f %4zu/%4zu/%4zu %6zu %6zu %8.4f %8.4f %6.2f %7.1f %10.0f %10.0f  est %.4f  plan_to_99 %zu  "
               "lost: range/incidence %.4f plate %.4f axes %.4f collision %.4f  "
-              "stages s: rough %.2f viewpoints %.2f matrix %.2f cover %.2f\n",
+              "stages s: rough %.2f viewpoints %.2f matrix %.2f cover %.2f  along normals: reach %.3f views %zu/%zu/%zu m_v_rch %.4f ratio %.2f  "
+              "oracle views to the plan's m_v %zu\n",
               object.c_str(), r.cell_name.c_str(), r.fine_vertices, r.reach, c.views_95, c.views_99, c.views_999, r.candidates,
               r.views, r.cand_reach, r.mv, r.ratio, r.plan_s, r.plan_t, c.cell_time_s, r.est, r.plan99, c.lost_range,
               c.lost_plate, c.lost_axes, c.lost_collision, r.stages.rough_model_s, r.stages.viewpoints_s, r.stages.matrix_s,
-              r.stages.cover_s);
+              r.stages.cover_s, r.along_normal.reachable(), r.along_normal.views_95, r.along_normal.views_99,
+              r.along_normal.views_999, r.mv_normal, r.ratio_normal, r.oracle_to_plan);
   std::fflush(stdout);
 }
 
@@ -167,7 +181,8 @@ void csv_row(std::ofstream& csv, const std::string& object, const Row& r) {
   csv << object << ',' << r.cell_name << ',' << r.fine_vertices << ',' << r.reach << ',' << c.views_95 << ',' << c.views_99 << ','
       << c.views_999 << ',' << r.views << ',' << r.mv << ',' << r.ratio << ',' << r.plan_s << ',' << r.plan_t << ','
       << c.cell_time_s << ',' << r.cand_reach << ',' << c.lost_range << ',' << c.lost_plate << ',' << c.lost_axes << ','
-      << c.lost_collision << '\n';
+      << c.lost_collision << ',' << r.along_normal.reachable() << ',' << r.along_normal.views_99 << ',' << r.mv_normal << ','
+      << r.ratio_normal << ',' << r.oracle_to_plan << '\n';
 }
 
 }  // namespace
@@ -191,7 +206,8 @@ int main(int argc, char** argv) {
     csv.open(o.csv_path);
     csv << "object,cell,fine_vertices,reachable,oracle_views_95,oracle_views_99,oracle_views_99.9,plan_views,"
            "plan_m_v_reachable,plan_over_oracle_99,plan_s,plan_cell_time_s,oracle_cell_time_s,candidates_reach,"
-           "lost_range_incidence,lost_plate,lost_axes,lost_collision\n";
+           "lost_range_incidence,lost_plate,lost_axes,lost_collision,normal_oracle_reachable,normal_oracle_views_99,"
+           "plan_m_v_normal_reachable,plan_over_normal_oracle_99,oracle_views_to_plan_m_v\n";
   }
   std::printf("sensor %s, spec %.3f mm / %.1f samples/mm2, rough %zu vertices, oracle 1 per %d fine vertices, "
               "%d threads\n",

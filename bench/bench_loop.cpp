@@ -3,7 +3,8 @@
 // driver code as real drives, scan with the virtual scanner, register, measure the rough model's coverage,
 // replan for what is left, until done, stalled or jobs.max_rounds), then every executed view judged by the
 // analytic measurability test on the fine mesh's vertices with the plate, as a share of what the cell oracle
-// (bench/cell_oracle.hpp) reaches, and the job's total views against the oracle's views to 99 %.
+// (bench/cell_oracle.hpp, in the cell's own space; the oracle along the normals alone beside it) reaches, and
+// the job's total views against the oracle's views to 99 %.
 //
 //   bench_loop [--meshes DIR] [--only a,b] [--rough-vertices N] [--refine-mm E] [--max-rounds N]
 //              [--placement auto|as_given] [--row-fraction F] [--normal-tolerance-mm T] [--footprint-samples K]
@@ -203,7 +204,8 @@ std::int64_t run_job(Rig& rig, const Options& o, const fs::path& mesh_file) {
 
 /// A finished job's executed views judged against the cell oracle in the placement the job planned in.
 struct Judged {
-  CellOracle oracle;
+  CellOracle oracle, along_normal;  // in the cell's own space; along the normals alone (cell_oracle.hpp)
+  double loop_normal = 0.0;         // m_v of the along-normal oracle's reach at the end
   std::vector<std::vector<sp::Viewpoint>> rounds;
   std::size_t fine_rows = 0, views = 0;
   double single = 0.0, loop = 0.0;  // m_v of the reach after round 0, at the end
@@ -239,11 +241,13 @@ Judged judge(Rig& rig, const Options& o, std::int64_t job, const sp::TriangleMes
   sp::TriangleMesh scene_mesh = fine.mesh();
   sp::append_mesh(scene_mesh, sp::fixture_mesh(placed));
   const sp::OcclusionScene scene(scene_mesh);
-  j.oracle = scancell::bench::cell_oracle(fine_mesh, fine, scene, m.sensor, m.spec, &placed, o.oracle_decimation);
+  j.oracle = scancell::bench::cell_oracle(fine_mesh, fine, scene, m.sensor, m.spec, &placed, o.oracle_decimation,
+                                          &m.settings.viewpoints, &j.along_normal);
   std::vector<sp::Viewpoint> all;
   for (const auto& rv : j.rounds) all.insert(all.end(), rv.begin(), rv.end());
   j.single = j.rounds.empty() ? 0.0 : scancell::bench::mv_of_reach(fine, scene, m.sensor, m.spec, j.rounds.front(), j.oracle);
   j.loop = scancell::bench::mv_of_reach(fine, scene, m.sensor, m.spec, all, j.oracle);
+  j.loop_normal = scancell::bench::mv_of_reach(fine, scene, m.sensor, m.spec, all, j.along_normal);
   if (!all.empty()) {
     const auto mm = sp::build_measurability(fine, scene, m.sensor, m.spec, all);
     std::vector<std::uint32_t> order(all.size());
@@ -281,7 +285,8 @@ int main(int argc, char** argv) {
     csv << "object,fine_vertices,reachable,oracle_views_95,oracle_views_99,oracle_views_99.9,end,rounds,round_views,"
            "single_shot_m_v_reachable,loop_m_v_reachable,loop_views,loop_over_oracle_99,verified_mv,verified_mv_reachable,analytic_mv,"
            "round_gains_predicted_realized_mm2,rounds_under_20_percent,needs_attention_area_mm2,job_cell_time_s,oracle_cell_time_s,"
-           "oracle_views_to_loop_m_v,own_views_to_loop_m_v,wall_s\n";
+           "oracle_views_to_loop_m_v,own_views_to_loop_m_v,wall_s,normal_oracle_reachable,normal_oracle_views_99,"
+           "loop_m_v_normal_reachable,loop_over_normal_oracle_99\n";
   }
   std::printf("closed loop on turntable-lift-tilt, placement %s, %zu rough rows, max_rounds %d, oracle 1 per %d fine vertices, %d threads\n",
               rig.models.settings.placement.automatic ? "auto" : "as_given", o.rough_vertices, o.max_rounds, o.oracle_decimation, o.threads);
@@ -305,6 +310,7 @@ int main(int argc, char** argv) {
     for (const auto& rv : j.rounds) per_round += (per_round.empty() ? "" : "+") + std::to_string(rv.size());
     const double verified = result.value("verified_mv", std::nan(""));
     const double ratio = oracle.views_99 ? double(j.views) / double(oracle.views_99) : std::nan("");
+    const double ratio_normal = j.along_normal.views_99 ? double(j.views) / double(j.along_normal.views_99) : std::nan("");
     const std::string weak = result.contains("rounds_under_20_percent") ? result["rounds_under_20_percent"].dump() : "[]";
     const double attention = result.value("needs_attention_area_mm2", 0.0);
     const double wall = scancell::seconds_since(t0);
@@ -315,11 +321,13 @@ int main(int argc, char** argv) {
                std::to_string(std::lround(g.value("predicted_gain_mm2", 0.0))) + "/" +
                std::to_string(std::lround(g.value("realized_gain_mm2", 0.0)));
     std::printf("%-16s %6zu %6.3f %4zu/%4zu/%4zu %-8s %-18s %8.4f %8.4f %6zu %6.2f %8.4f %8.4f %8.4f %9.0f %9.0f %7.0f  to the job's m_v: oracle %zu views, "
-                "the job's own %zu; gains %s, weak rounds %s, needs attention %.0f mm2: %s\n",
+                "the job's own %zu; along normals: reach %.3f views %zu/%zu/%zu m_v_r %.4f ratio %.2f; gains %s, weak rounds %s, "
+                "needs attention %.0f mm2: %s\n",
                 obj.name.c_str(), j.fine_rows, oracle.reachable(), oracle.views_95, oracle.views_99, oracle.views_999,
                 dm::to_string(rec.state), per_round.c_str(), j.single, j.loop, j.views, ratio, verified,
                 verified / oracle.reachable(), j.analytic_mv, j.job_cell_time_s, oracle.cell_time_s, wall, j.oracle_views_to_loop,
-                j.own_views_to_loop, gains.c_str(), weak.c_str(), attention,
+                j.own_views_to_loop, j.along_normal.reachable(), j.along_normal.views_95, j.along_normal.views_99,
+                j.along_normal.views_999, j.loop_normal, ratio_normal, gains.c_str(), weak.c_str(), attention,
                 rec.cause.c_str());
     std::fflush(stdout);
     if (csv)
@@ -328,7 +336,8 @@ int main(int argc, char** argv) {
           << j.single << ',' << j.loop << ',' << j.views << ',' << ratio << ',' << verified << ','
           << verified / oracle.reachable() << ',' << j.analytic_mv << ',' << gains << ',' << '"' << weak << '"' << ',' << attention << ','
           << j.job_cell_time_s << ',' << oracle.cell_time_s << ',' << j.oracle_views_to_loop << ',' << j.own_views_to_loop << ','
-          << wall << '\n';
+          << wall << ',' << j.along_normal.reachable() << ',' << j.along_normal.views_99 << ',' << j.loop_normal << ','
+          << ratio_normal << '\n';
   }
   if (o.keep_dir.empty()) fs::remove_all(rig.work);
   return 0;

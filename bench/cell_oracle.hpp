@@ -9,14 +9,25 @@
 // (baseline along world +Y, camera on +X), tilt clamped to the tilt axis' range; on arm_turntable free
 // space's 8 twists (a wrist takes any); on a cell the axes must reach each and
 // the scanner body must clear the fine object and the plate, stepping back along the boresight when not.
+//
+// In the cell's own space (`cell_space` given, cell-native cells): the same aims also get the views the
+// planner's cell-native generator makes of a point (planner/core/cell_viewpoints.hpp, as a replan aims at the
+// footprint samples of open rows): on turntable_lift_tilt the bisector pair and the two oblique views beside
+// the thesis' view, on arm_turntable every twist stepped back or lowered. The plan's candidates are such views
+// of rough-model points; without them the oracle's reach lacks what only a slanted view measures (a bore's
+// wall, a face turned to the plate), and the plan's views there count against it. `along_normal` then keeps
+// the oracle above (QUALITY-TARGETS.md's), from the same matrix.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <numbers>
 #include <optional>
+#include <set>
 #include <vector>
 
 #include "planner/config.hpp"
+#include "planner/core/cell_viewpoints.hpp"
 #include "planner/core/cover.hpp"
 #include "planner/core/measurability.hpp"
 #include "planner/kinematics/cell.hpp"
@@ -136,14 +147,30 @@ struct CellOracle {
   double reachable() const { return total_area_mm2 > 0 ? reach_area_mm2 / total_area_mm2 : 0.0; }
 };
 
+/// The cell's own views (the planner's cell-native generator) of every `decimation`-th fine vertex along its
+/// normal, at f_d·R_o; reachable and clear of `checker`'s object and fixtures.
+inline std::vector<sp::Viewpoint> cell_space_candidates(const sp::RoughModel& fine, const sp::SensorModel& sensor,
+                                                        const sp::ModelSpec& spec, const sp::CellModel& cell,
+                                                        const sp::CollisionChecker& checker, const sp::ViewpointSettings& vs,
+                                                        int decimation) {
+  std::vector<sp::AimPoint> aims;
+  for (std::uint32_t i = 0; i < fine.size(); i += decimation)
+    if (fine.normals[i].squaredNorm() > 0.5)  // a knife edge's zero normal says nothing about where to look from
+      aims.push_back({fine.points[i], fine.normals[i], 1.02 * sensor.optimal_standoff_mm, static_cast<std::int32_t>(i)});
+  return sp::cell_viewpoints_at(aims, sensor, spec, vs, cell, checker);
+}
+
 /// The oracle for the fine model `fine` (rows of `fine_mesh`) in `scene` (the fine mesh and, on a cell, the
-/// plate), on the placed `cell` or in free space.
+/// plate), on the placed `cell` or in free space; with `cell_space` on a cell-native cell, in the cell's own
+/// space (above), and then `along_normal` (when given) is the oracle of the views along the normals alone.
 inline CellOracle cell_oracle(const sp::TriangleMesh& fine_mesh, const sp::RoughModel& fine, const sp::OcclusionScene& scene,
                               const sp::SensorModel& sensor, const sp::ModelSpec& spec, const sp::CellModel* cell,
-                              int decimation) {
+                              int decimation, const sp::ViewpointSettings* cell_space = nullptr,
+                              CellOracle* along_normal = nullptr) {
   std::vector<sp::Viewpoint> cands = oracle_candidates(fine, sensor, spec, cell, decimation);
   const std::size_t n_base = cands.size();
   std::vector<std::uint8_t> usable(n_base, 1), axis_ok(n_base, 1);
+  std::size_t n_normal = n_base;  // the views along the normals, stepped back ones included
   if (cell) {
     const sp::CollisionChecker checker(*cell, fine_mesh);
     const double cap = std::min(sensor.range_max_mm, sp::max_range_for_precision_mm(sensor, spec));
@@ -168,6 +195,22 @@ inline CellOracle cell_oracle(const sp::TriangleMesh& fine_mesh, const sp::Rough
       }
     }
     cands.insert(cands.end(), stepped.begin(), stepped.end());
+    n_normal = cands.size();
+    if (cell_space && sp::has_cell_native_viewpoints(*cell)) {
+      // Poses the views along the normals already hold (on the arm, most: its own space starts from the
+      // same eight twists) are not evaluated twice.
+      auto key = [](const sp::Viewpoint& v) {
+        const Eigen::Matrix4d m = v.transform();
+        std::array<long long, 12> k{};
+        for (int e = 0; e < 12; ++e) k[e] = std::llround(m(e / 4, e % 4) * (e % 4 == 3 ? 1e6 : 1e9));
+        return k;
+      };
+      std::set<std::array<long long, 12>> seen;
+      for (std::size_t i = 0; i < cands.size(); ++i)
+        if (usable[i]) seen.insert(key(cands[i]));
+      for (const auto& v : cell_space_candidates(fine, sensor, spec, *cell, checker, *cell_space, decimation))
+        if (seen.insert(key(v)).second) cands.push_back(v);
+    }
     usable.resize(cands.size(), 1);
     axis_ok.resize(cands.size(), 1);
   }
@@ -185,43 +228,50 @@ inline CellOracle cell_oracle(const sp::TriangleMesh& fine_mesh, const sp::Rough
     const auto nm = sp::build_measurability(fine, bare, sensor, spec, base);
     for (const auto& c : nm.columns) c.for_each([&](std::uint32_t r) { reach_noplate[r] = 1; });
   }
-  sp::MeasurabilityMatrix om;
-  om.n_rows = all_m.n_rows;
-  std::vector<std::size_t> om_cand;
-  for (std::size_t i = 0; i < cands.size(); ++i) {
-    if (i < n_base) all_m.columns[i].for_each([&](std::uint32_t r) { reach_plate[r] = 1; });
-    if (i < n_base && axis_ok[i]) all_m.columns[i].for_each([&](std::uint32_t r) { reach_axes[r] = 1; });
-    if (usable[i]) {
-      om.columns.push_back(all_m.columns[i]);
-      om_cand.push_back(i);
+  for (std::size_t i = 0; i < n_base; ++i) {
+    all_m.columns[i].for_each([&](std::uint32_t r) { reach_plate[r] = 1; });
+    if (axis_ok[i]) all_m.columns[i].for_each([&](std::uint32_t r) { reach_axes[r] = 1; });
+  }
+  // The oracle of the usable candidates before `limit`: its reach, what is lost by cause, its greedy cover.
+  auto oracle_of = [&](std::size_t limit) {
+    sp::MeasurabilityMatrix om;
+    om.n_rows = all_m.n_rows;
+    std::vector<std::size_t> om_cand;
+    for (std::size_t i = 0; i < limit; ++i)
+      if (usable[i]) {
+        om.columns.push_back(all_m.columns[i]);
+        om_cand.push_back(i);
+      }
+    CellOracle o;
+    o.reach.assign(fine.size(), 0);
+    for (const auto& c : om.columns) c.for_each([&](std::uint32_t r) { o.reach[r] = 1; });
+    o.reach_area_mm2 = area_of(o.reach);
+    o.total_area_mm2 = fine.total_area_mm2;
+    const double total = o.total_area_mm2;
+    o.lost_range = cell ? 1.0 - area_of(reach_noplate) / total : 1.0 - area_of(reach_plate) / total;
+    o.lost_plate = cell ? (area_of(reach_noplate) - area_of(reach_plate)) / total : 0.0;
+    o.lost_axes = (area_of(reach_plate) - area_of(reach_axes)) / total;
+    o.lost_collision = (area_of(reach_axes) - o.reach_area_mm2) / total;
+    sp::CoverSettings cs;
+    cs.mode = sp::CoverMode::greedy;
+    cs.eliminate_redundant = false;
+    const auto oc = sp::greedy_cover(om, fine.area_mm2, cs);
+    const auto oprog = progression(om, oc.views, fine.area_mm2, o.reach, o.reach_area_mm2);
+    o.views_95 = views_to(oprog, 0.95);
+    o.views_99 = views_to(oprog, 0.99);
+    o.views_999 = views_to(oprog, 0.999);
+    o.progression = oprog;
+    if (cell) {
+      std::vector<sp::Viewpoint> ov;
+      for (std::size_t k = 0; k < std::min<std::size_t>(o.views_99 ? o.views_99 : oc.views.size(), oc.views.size()); ++k)
+        ov.push_back(cands[om_cand[oc.views[k]]]);
+      o.cell_time_s = cell_time_s(*cell, ov);
     }
-  }
-  CellOracle o;
-  o.reach.assign(fine.size(), 0);
-  for (const auto& c : om.columns) c.for_each([&](std::uint32_t r) { o.reach[r] = 1; });
-  o.reach_area_mm2 = area_of(o.reach);
-  o.total_area_mm2 = fine.total_area_mm2;
-  const double total = o.total_area_mm2;
-  o.lost_range = cell ? 1.0 - area_of(reach_noplate) / total : 1.0 - area_of(reach_plate) / total;
-  o.lost_plate = cell ? (area_of(reach_noplate) - area_of(reach_plate)) / total : 0.0;
-  o.lost_axes = (area_of(reach_plate) - area_of(reach_axes)) / total;
-  o.lost_collision = (area_of(reach_axes) - o.reach_area_mm2) / total;
-  sp::CoverSettings cs;
-  cs.mode = sp::CoverMode::greedy;
-  cs.eliminate_redundant = false;
-  const auto oc = sp::greedy_cover(om, fine.area_mm2, cs);
-  const auto oprog = progression(om, oc.views, fine.area_mm2, o.reach, o.reach_area_mm2);
-  o.views_95 = views_to(oprog, 0.95);
-  o.views_99 = views_to(oprog, 0.99);
-  o.views_999 = views_to(oprog, 0.999);
-  o.progression = oprog;
-  if (cell) {
-    std::vector<sp::Viewpoint> ov;
-    for (std::size_t k = 0; k < std::min<std::size_t>(o.views_99 ? o.views_99 : oc.views.size(), oc.views.size()); ++k)
-      ov.push_back(cands[om_cand[oc.views[k]]]);
-    o.cell_time_s = cell_time_s(*cell, ov);
-  }
-  return o;
+    return o;
+  };
+  CellOracle full = oracle_of(cands.size());
+  if (along_normal) *along_normal = n_normal < cands.size() ? oracle_of(n_normal) : full;
+  return full;
 }
 
 /// The share of the oracle's reach that `views` measure by the analytic test on the fine rows.

@@ -40,6 +40,7 @@ struct CellGenerationReport {
   std::size_t unreachable = 0;   // no twist sign the axes reach
   std::size_t colliding = 0;     // collides at every stand-off tried
   std::size_t footprint_aims = 0, footprint_candidates = 0;  // replans: points aimed at what open rows lack, views kept
+  std::size_t self_aims = 0, self_candidates = 0;  // rows no candidate measured, aimed at themselves; views kept
 };
 
 /// A surface point to aim views at: where (object frame, mm), its outward unit normal, the stand-off to start
