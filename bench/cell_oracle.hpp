@@ -199,17 +199,11 @@ inline CellOracle cell_oracle(const sp::TriangleMesh& fine_mesh, const sp::Rough
     if (cell_space && sp::has_cell_native_viewpoints(*cell)) {
       // Poses the views along the normals already hold (on the arm, most: its own space starts from the
       // same eight twists) are not evaluated twice.
-      auto key = [](const sp::Viewpoint& v) {
-        const Eigen::Matrix4d m = v.transform();
-        std::array<long long, 12> k{};
-        for (int e = 0; e < 12; ++e) k[e] = std::llround(m(e / 4, e % 4) * (e % 4 == 3 ? 1e6 : 1e9));
-        return k;
-      };
       std::set<std::array<long long, 12>> seen;
       for (std::size_t i = 0; i < cands.size(); ++i)
-        if (usable[i]) seen.insert(key(cands[i]));
+        if (usable[i]) seen.insert(cands[i].pose_key());
       for (const auto& v : cell_space_candidates(fine, sensor, spec, *cell, checker, *cell_space, decimation))
-        if (seen.insert(key(v)).second) cands.push_back(v);
+        if (seen.insert(v.pose_key()).second) cands.push_back(v);
     }
     usable.resize(cands.size(), 1);
     axis_ok.resize(cands.size(), 1);

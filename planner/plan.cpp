@@ -192,11 +192,7 @@ void merge_duplicates(ViewPlan& p, std::vector<Viewpoint>& cands) {
   std::vector<Viewpoint> kept;
   std::set<std::array<long long, 12>> seen;
   for (std::size_t i = 0; i < cands.size(); ++i) {
-    const Eigen::Matrix4d m = cands[i].transform();
-    std::array<long long, 12> key{};
-    for (int k = 0; k < 12; ++k)
-      key[k] = std::llround(m(k / 4, k % 4) * (k % 4 == 3 ? 1e6 : 1e9));
-    if (!seen.insert(key).second) {
+    if (!seen.insert(cands[i].pose_key()).second) {
       ++p.cell_report.duplicates;
       continue;
     }

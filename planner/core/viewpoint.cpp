@@ -143,6 +143,13 @@ Eigen::Matrix4d Viewpoint::transform() const {
   return t;
 }
 
+std::array<long long, 12> Viewpoint::pose_key() const {
+  const Eigen::Matrix4d m = transform();
+  std::array<long long, 12> key{};
+  for (int k = 0; k < 12; ++k) key[k] = std::llround(m(k / 4, k % 4) * (k % 4 == 3 ? 1e6 : 1e9));
+  return key;
+}
+
 double design_scan_length_mm(const SensorModel& sensor, const ModelSpec& spec, double range_mm,
                              double design_incidence_rad) {
   if (sensor.kind != SensorKind::line_scan) return 0.0;

@@ -1,6 +1,7 @@
 #pragma once
 // Candidate viewpoints (thesis ch. 6): the optimal scanning zone (each targeted rough-model vertex dilated
 // along its normal by the stand-off), the VARIABLE per-view rules and the DECOUPLED position/twist sampling.
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -28,6 +29,9 @@ struct Viewpoint {
   Eigen::Matrix3d rotation() const;
   /// Camera-to-object homogeneous transform.
   Eigen::Matrix4d transform() const;
+  /// The pose rounded (rotation to 1e-9, position to 1e-6 mm): views with equal keys are one pose (the scan
+  /// length aside), for merging candidates that coincide.
+  std::array<long long, 12> pose_key() const;
 };
 
 /// Camera-to-object rotation of a view with boresight `axis`, twist, and a tilt about the resulting camera x
