@@ -310,14 +310,12 @@ MeasurabilityMatrix make_matrix(const Stage& s, const OcclusionScene& scene, con
   std::vector<std::uint32_t> unmeasurable = open_rows_nothing_measures(matrix, s.measured_rows);
   p.generation.rows_unmeasurable_before = unmeasurable.size();
   const bool native = p.cell && s.settings.viewpoints.cell_native && has_cell_native_viewpoints(*p.cell);
-  if (native && p.cell->kinematics == CellKinematics::turntable_lift_tilt && !unmeasurable.empty()) {
+  if (native && !unmeasurable.empty()) {
     // The optimal zone aims at every d_v-th row only, and a row between aims in a cleft or by the plate is
     // open only to a view aimed at it, along its own normal or slanted (the cell oracle aims at every 4th
     // fine vertex so). knot1 on the turntable: the area no candidate reached fell from 2.2 % of the oracle's
-    // reach to 0.9 % (docs/quality.md). Not on the arm: its optimal zone already takes every twist at each
-    // position, and the rows it leaves are mostly out of the arm's reach, whose inverse kinematics fails
-    // slowly (the box's plan 7 s -> 45 s for the same views; cow +0.006 and the tube +0.009 of the reach,
-    // four objects unchanged, elephant -0.001).
+    // reach to 0.9 % (docs/quality.md). On the arm too since its inverse kinematics stops stalled solves
+    // early (the box's plan took 45 s with these views, 15 s since; docs/quality.md).
     std::vector<AimPoint> aims;
     const double standoff = s.sensor.optimal_standoff_mm * s.settings.viewpoints.standoff_factor;
     for (auto r : unmeasurable)

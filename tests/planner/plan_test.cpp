@@ -486,10 +486,10 @@ TEST_F(Cli, ExactCoverRecordsTheSolverAndIsNeverWorseThanGreedy) {
 // the footprint plan predicts none. Checked here with the samples' own matrix, independent of the cover's
 // bookkeeping. The plan is the same for any thread count.
 // On a cell-native cell, rows no candidate of the optimal zone measures get the cell's views aimed at
-// themselves (plan.cpp, make_matrix). A box on the turntable's plate with optimal-zone positions so sparse that
-// most faces get no view: after the self-aimed views every row the cell can see is measurable and only the
-// face resting on the plate is left; without them (the same plan with aims only at the few positions and no
-// open-direction rescue) most of the box is.
+// themselves (plan.cpp, make_matrix). A box on the plate of either shipped cell with optimal-zone positions so
+// sparse that most faces get no view: after the self-aimed views every row the cell can see is measurable and
+// only the face resting on the plate is left; without them (the same plan with aims only at the few positions
+// and no open-direction rescue) most of the box is.
 TEST(Plan, RowsNothingMeasuresGetTheCellsViewsAimedAtThemselves) {
   TriangleMesh faces;
   testing::add_box(faces, {-40, -40, 0}, {40, 40, 60}, 10.0);
@@ -497,25 +497,28 @@ TEST(Plan, RowsNothingMeasuresGetTheCellsViewsAimedAtThemselves) {
   write_off(faces, file.string());
   const TriangleMesh box = load_mesh(file);  // welded: one row per corner, edge normals between the faces
   fs::remove(file);
-  const CellModel cell = load_cell(testing::source_path("config/cells/turntable-lift-tilt.yaml"));
-  PlannerSettings sparse;
-  sparse.viewpoints.position_decimation = 400;  // two or three optimal-zone positions on the whole box
-  sparse.viewpoints.open_direction_views = false;
-  const ViewPlan p = plan_views(box, testing::thesis_sensor(), testing::thesis_spec(), sparse, RoughModelOptions{}, 2, &cell);
-  // What rests on the plate (the bottom face and its rim, z = 0) is left, nothing above it.
-  std::size_t on_plate = 0;
-  for (const auto& q : p.rough.points) on_plate += q.z() < 1e-6;
-  const std::set<std::uint32_t> left(p.cover.unmeasurable_rows.begin(), p.cover.unmeasurable_rows.end());
-  for (auto r : left) EXPECT_LT(p.rough.points[r].z(), 1e-6) << "row " << r << " at " << p.rough.points[r].transpose();
-  EXPECT_LE(left.size(), on_plate);
-  EXPECT_GT(p.generation.rows_unmeasurable_before, 3 * on_plate);  // the sparse aims alone left most of the box
-  EXPECT_EQ(p.cell_generation.self_aims, p.generation.rows_unmeasurable_before);
-  EXPECT_GT(p.cell_generation.self_candidates, p.cell_generation.candidates);
-  // The plan measures every side and the top: each row above the plate predicted.
-  const std::set<std::uint32_t> predicted(p.predicted_rows.begin(), p.predicted_rows.end());
-  for (std::uint32_t r = 0; r < p.rough.size(); ++r) {
-    if (p.rough.points[r].z() > 1e-6) {
-      EXPECT_TRUE(predicted.count(r)) << "row " << r << " at " << p.rough.points[r].transpose();
+  for (const char* cell_file : {"config/cells/turntable-lift-tilt.yaml", "config/cells/arm-turntable.yaml"}) {
+    SCOPED_TRACE(cell_file);
+    const CellModel cell = load_cell(testing::source_path(cell_file));
+    PlannerSettings sparse;
+    sparse.viewpoints.position_decimation = 400;  // two or three optimal-zone positions on the whole box
+    sparse.viewpoints.open_direction_views = false;
+    const ViewPlan p = plan_views(box, testing::thesis_sensor(), testing::thesis_spec(), sparse, RoughModelOptions{}, 2, &cell);
+    // What rests on the plate (the bottom face and its rim, z = 0) is left, nothing above it.
+    std::size_t on_plate = 0;
+    for (const auto& q : p.rough.points) on_plate += q.z() < 1e-6;
+    const std::set<std::uint32_t> left(p.cover.unmeasurable_rows.begin(), p.cover.unmeasurable_rows.end());
+    for (auto r : left) EXPECT_LT(p.rough.points[r].z(), 1e-6) << "row " << r << " at " << p.rough.points[r].transpose();
+    EXPECT_LE(left.size(), on_plate);
+    EXPECT_GT(p.generation.rows_unmeasurable_before, 3 * on_plate);  // the sparse aims alone left most of the box
+    EXPECT_EQ(p.cell_generation.self_aims, p.generation.rows_unmeasurable_before);
+    EXPECT_GT(p.cell_generation.self_candidates, p.cell_generation.candidates);
+    // The plan measures every side and the top: each row above the plate predicted.
+    const std::set<std::uint32_t> predicted(p.predicted_rows.begin(), p.predicted_rows.end());
+    for (std::uint32_t r = 0; r < p.rough.size(); ++r) {
+      if (p.rough.points[r].z() > 1e-6) {
+        EXPECT_TRUE(predicted.count(r)) << "row " << r << " at " << p.rough.points[r].transpose();
+      }
     }
   }
 }
