@@ -479,12 +479,6 @@ TEST_F(Cli, ExactCoverRecordsTheSolverAndIsNeverWorseThanGreedy) {
   EXPECT_THAT(bad.output, HasSubstr("cover.mode: must be greedy, constrained or exact"));
 }
 
-// A single shot on a cell by footprint (matrix.cell_footprint_samples, issue 15): a row is predicted measured
-// only when the chosen views measure enough of its footprint's samples (all 8 of 8 at jobs.row_fraction 0.9),
-// as the closed loop will judge it. On a box on the plate (welded, as a file is) the vertex test predicts rows
-// whose footprint the same views do not measure, where the box's rims bend the footprint onto another face;
-// the footprint plan predicts none. Checked here with the samples' own matrix, independent of the cover's
-// bookkeeping. The plan is the same for any thread count.
 // On a cell-native cell, rows no candidate of the optimal zone measures get the cell's views aimed at
 // themselves (plan.cpp, make_matrix). A box on the plate of either shipped cell with optimal-zone positions so
 // sparse that most faces get no view: after the self-aimed views every row the cell can see is measurable and
@@ -523,6 +517,12 @@ TEST(Plan, RowsNothingMeasuresGetTheCellsViewsAimedAtThemselves) {
   }
 }
 
+// A single shot on a cell by footprint (matrix.cell_footprint_samples, issue 15): a row is predicted measured
+// only when the chosen views measure enough of its footprint's samples (all 8 of 8 at jobs.row_fraction 0.9),
+// as the closed loop will judge it. On a box on the plate (welded, as a file is) the vertex test predicts rows
+// whose footprint the same views do not measure, where the box's rims bend the footprint onto another face;
+// the footprint plan predicts none. Checked here with the samples' own matrix, independent of the cover's
+// bookkeeping. The plan is the same for any thread count.
 TEST(Plan, ASingleShotOnACellPredictsRowsByTheirFootprints) {
   TriangleMesh faces;
   testing::add_box(faces, {-40, -40, 0}, {40, 40, 60}, 4.0);
