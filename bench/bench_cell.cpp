@@ -197,7 +197,7 @@ int main(int argc, char** argv) {
   settings.keep_candidates = true;
 
   std::vector<bench::BenchObject> objects = bench::shared_mesh_objects(o.meshes_dir, o.refine_mm);
-  for (auto& obj : bench::cad_objects(3.0)) objects.push_back(std::move(obj));
+  for (auto& obj : bench::cad_objects(3.0, o.refine_mm)) objects.push_back(std::move(obj));
 
   const int n_threads = o.threads > 0 ? o.threads : tbb::info::default_concurrency();
   tbb::task_arena arena(n_threads);

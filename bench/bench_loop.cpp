@@ -277,7 +277,7 @@ int main(int argc, char** argv) {
   const Options& o = *opt;
   Rig rig = make_rig(o);
   std::vector<scancell::bench::BenchObject> objects = scancell::bench::shared_mesh_objects(o.meshes_dir, o.refine_mm);
-  for (auto& obj : scancell::bench::cad_objects(3.0)) objects.push_back(std::move(obj));
+  for (auto& obj : scancell::bench::cad_objects(3.0, o.refine_mm)) objects.push_back(std::move(obj));
 
   std::ofstream csv;
   if (!o.csv_path.empty()) {

@@ -129,7 +129,7 @@ std::vector<Object> make_objects(double fs_mm2, const Options& o) {
                          return sp::cavity_patch(plate, 0.8 * plate, dw, 0.5);
                        }});
   }
-  for (auto& b : bench::cad_objects(1.5)) objects.push_back({b.name, std::move(b.make)});
+  for (auto& b : bench::cad_objects(1.5, 0.0)) objects.push_back({b.name, std::move(b.make)});
   for (auto& b : bench::shared_mesh_objects(o.meshes_dir, o.refine_mm)) objects.push_back({b.name, std::move(b.make)});
   return objects;
 }
