@@ -46,7 +46,13 @@ struct RoughModelReport {
   bool decimated = false;
 };
 
-/// Quadric decimation (OpenMesh Decimater, ModQuadric) to at most target_vertices vertices.
+/// From this many vertices (and 4× the target) a mesh is decimated in two halves at once (decimate()).
+inline constexpr std::size_t kDecimateInHalvesMinVertices = 20000;
+
+/// Quadric decimation (OpenMesh Decimater, ModQuadric) to at most target_vertices vertices. A mesh of
+/// kDecimateInHalvesMinVertices or more (and at least 4× the target) is cut in two by its faces' median
+/// along its longest side; the halves are decimated at once, the vertices they share kept, and then the band
+/// along the cut: about half the time on two cores, the same result for any thread count.
 TriangleMesh decimate(const TriangleMesh& mesh, std::size_t target_vertices, std::size_t* faces_rejected = nullptr);
 
 /// Builds the rough model: optional decimation and normal noise, then normals, areas and Morton order.

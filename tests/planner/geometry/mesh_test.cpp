@@ -10,6 +10,7 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <tbb/task_arena.h>
 
 #include "common/errors.hpp"
 #include "planner/geometry/mesh.hpp"
@@ -220,6 +221,13 @@ Topology topology(const TriangleMesh& m) {
   return t;
 }
 
+/// A mesh and the Euler characteristic its decimated forms must keep.
+struct TopologyCase {
+  const char* name;
+  TriangleMesh mesh;
+  long euler;
+};
+
 /// A long rectangle a few rows wide, on z = 0: rim vertices on both sides of most edges.
 TriangleMesh strip(double length_mm, double width_mm, double step_mm) {
   TriangleMesh m;
@@ -234,12 +242,7 @@ TEST(RoughModel, DecimationKeepsTheTopology) {
   // every collapse that would pinch the surface: a sphere stays a sphere (χ 2), a tube a torus (χ 0), an open
   // patch a disc (χ 1) with its rim, each edge shared by at most two triangles; down to a few dozen vertices,
   // where the link condition decides most collapses.
-  struct Case {
-    const char* name;
-    TriangleMesh mesh;
-    long euler;
-  };
-  const Case cases[] = {{"sphere", testing::uv_sphere(Eigen::Vector3d::Zero(), 50.0, 30, 60), 2},
+  const TopologyCase cases[] = {{"sphere", testing::uv_sphere(Eigen::Vector3d::Zero(), 50.0, 30, 60), 2},
                         {"tube", cylinder_with_bore(80, 50, 50, 6.0), 0},
                         {"patch", testing::flat_patch(60.0, 2.0), 1},
                         {"strip", strip(200.0, 2.0, 2.0), 1}};
@@ -251,6 +254,33 @@ TEST(RoughModel, DecimationKeepsTheTopology) {
       const RoughModel rm = build_rough_model(c.mesh, o);
       const Topology t = topology(TriangleMesh{rm.points, rm.triangles});
       EXPECT_LE(rm.size(), std::max(target, c.mesh.vertices.size() / 4)) << c.name << " to " << target;
+      EXPECT_EQ(t.euler, c.euler) << c.name << " to " << target;
+      EXPECT_TRUE(t.manifold_edges) << c.name << " to " << target;
+      EXPECT_EQ(t.boundary_edges > 0, c.euler == 1) << c.name << " to " << target;
+    }
+  }
+}
+
+TEST(RoughModel, LargeMeshesDecimateInTwoHalvesKeepingTheTopologyForAnyThreadCount) {
+  // From 20k vertices the two halves of a mesh decimate at once, the vertices they share locked, and then
+  // the band along that seam (rough_model.cpp decimate_halves). The surface must come out as whole as from
+  // one pass (no slit or pinch along the seam), at the target count, and the same with one thread or two.
+  const TopologyCase cases[] = {{"sphere", testing::uv_sphere(Eigen::Vector3d::Zero(), 60.0, 150, 150), 2},
+                        {"tube", cylinder_with_bore(80, 50, 50, 1.0), 0},
+                        {"patch", testing::flat_patch(150.0, 1.0), 1}};
+  for (const auto& c : cases) {
+    ASSERT_GE(c.mesh.vertices.size(), kDecimateInHalvesMinVertices) << c.name;
+    ASSERT_EQ(topology(c.mesh).euler, c.euler) << c.name;
+    for (std::size_t target : {std::size_t{2000}}) {
+      RoughModelOptions o;
+      o.target_vertices = target;
+      RoughModel one, two;
+      tbb::task_arena(1).execute([&] { one = build_rough_model(c.mesh, o); });
+      tbb::task_arena(2).execute([&] { two = build_rough_model(c.mesh, o); });
+      EXPECT_EQ(one.points, two.points) << c.name << " to " << target;
+      EXPECT_EQ(one.triangles, two.triangles) << c.name << " to " << target;
+      const Topology t = topology(TriangleMesh{one.points, one.triangles});
+      EXPECT_EQ(one.size(), target) << c.name;
       EXPECT_EQ(t.euler, c.euler) << c.name << " to " << target;
       EXPECT_TRUE(t.manifold_edges) << c.name << " to " << target;
       EXPECT_EQ(t.boundary_edges > 0, c.euler == 1) << c.name << " to " << target;
