@@ -161,7 +161,7 @@ struct Halves {
 };
 
 /// Faces by their centroid against the median centroid along the longest side of the bounding box: the
-/// halves have as many faces each, and the cut depends on the mesh alone.
+/// halves have about as many faces each, and the cut depends on the mesh alone.
 Halves cut_in_halves(const TriangleMesh& mesh) {
   Eigen::Vector3d lo = mesh.vertices.front(), hi = lo;
   for (const auto& v : mesh.vertices) lo = lo.cwiseMin(v), hi = hi.cwiseMax(v);
@@ -234,6 +234,11 @@ TriangleMesh join_halves(const Halves& h, const std::array<TriangleMesh, 2>& coa
 TriangleMesh decimate_halves(const TriangleMesh& mesh, std::size_t target_vertices, std::size_t* faces_rejected) {
   const double even_edge = even_edge_for(mesh, target_vertices);
   const Halves h = cut_in_halves(mesh);
+  if (h.part[0].triangles.empty() || h.part[1].triangles.empty()) {  // every centroid on the median: one pass
+    OMesh om;
+    fill_omesh(om, mesh, {}, faces_rejected);
+    return collapse_to(om, target_vertices, even_edge, nullptr);
+  }
   const double keep = static_cast<double>(target_vertices) / static_cast<double>(h.used_vertices);
   std::array<OMesh, 2> om;
   std::array<std::size_t, 2> rejected{0, 0};
