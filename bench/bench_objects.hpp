@@ -17,6 +17,11 @@ struct BenchObject {
   std::function<planner::TriangleMesh()> make;  // made when its turn comes (fine meshes are large)
 };
 
+/// `m` with its edges refined to `refine_mm`, or as it is for 0.
+inline planner::TriangleMesh refined(const planner::TriangleMesh& m, double refine_mm) {
+  return refine_mm > 0.0 ? planner::refine_edges(m, refine_mm) : m;
+}
+
 /// Every .off in `dir`, in name order, scaled to a 200 mm longest side and its edges refined to
 /// `refine_mm` (0: as given); none when `dir` is not a directory.
 inline std::vector<BenchObject> shared_mesh_objects(const std::filesystem::path& dir, double refine_mm) {
@@ -30,7 +35,7 @@ inline std::vector<BenchObject> shared_mesh_objects(const std::filesystem::path&
     out.push_back({f.stem().string(), [f, refine_mm] {
                      planner::TriangleMesh m = planner::load_mesh(f);
                      planner::apply_scale(m, planner::fit_scale(m, 200.0));
-                     return refine_mm > 0.0 ? planner::refine_edges(m, refine_mm) : m;
+                     return refined(m, refine_mm);
                    }});
   return out;
 }
@@ -42,9 +47,8 @@ inline std::vector<BenchObject> shared_mesh_objects(const std::filesystem::path&
 /// refined to 3 mm; where a vertex weighs that much, one at a rim decides its whole share, and the daemon's
 /// verified m_v and the analytic test of the tube's closed loop differed by 0.031 (docs/verification.md).
 inline std::vector<BenchObject> cad_objects(double edge_mm, double refine_mm) {
-  auto refined = [refine_mm](planner::TriangleMesh m) { return refine_mm > 0.0 ? planner::refine_edges(m, refine_mm) : m; };
-  return {{"box-blind-hole", [=] { return refined(planner::box_with_blind_hole({120, 80, 60}, 30, 30, edge_mm)); }},
-          {"tube-bore", [=] { return refined(planner::cylinder_with_bore(80, 50, 50, edge_mm)); }}};
+  return {{"box-blind-hole", [=] { return refined(planner::box_with_blind_hole({120, 80, 60}, 30, 30, edge_mm), refine_mm); }},
+          {"tube-bore", [=] { return refined(planner::cylinder_with_bore(80, 50, 50, edge_mm), refine_mm); }}};
 }
 
 }  // namespace scancell::bench

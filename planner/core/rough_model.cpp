@@ -150,6 +150,12 @@ double even_edge_for(const TriangleMesh& mesh, std::size_t target_vertices) {
   return std::sqrt(2.0 * area / (std::sqrt(3.0) * std::max<std::size_t>(target_vertices, 1)));
 }
 
+TriangleMesh decimate_in_one_pass(const TriangleMesh& mesh, std::size_t target_vertices, double even_edge, std::size_t* faces_rejected) {
+  OMesh om;
+  fill_omesh(om, mesh, {}, faces_rejected);
+  return collapse_to(om, target_vertices, even_edge, nullptr);
+}
+
 /// A mesh cut in two by its faces: each part's triangles over its own vertices, which mesh vertex each is,
 /// and which of them the other part uses too (the seam).
 struct Halves {
@@ -234,11 +240,8 @@ TriangleMesh join_halves(const Halves& h, const std::array<TriangleMesh, 2>& coa
 TriangleMesh decimate_halves(const TriangleMesh& mesh, std::size_t target_vertices, std::size_t* faces_rejected) {
   const double even_edge = even_edge_for(mesh, target_vertices);
   const Halves h = cut_in_halves(mesh);
-  if (h.part[0].triangles.empty() || h.part[1].triangles.empty()) {  // every centroid on the median: one pass
-    OMesh om;
-    fill_omesh(om, mesh, {}, faces_rejected);
-    return collapse_to(om, target_vertices, even_edge, nullptr);
-  }
+  if (h.part[0].triangles.empty() || h.part[1].triangles.empty())  // every centroid on the median
+    return decimate_in_one_pass(mesh, target_vertices, even_edge, faces_rejected);
   const double keep = static_cast<double>(target_vertices) / static_cast<double>(h.used_vertices);
   std::array<OMesh, 2> om;
   std::array<std::size_t, 2> rejected{0, 0};
@@ -267,14 +270,9 @@ TriangleMesh decimate_halves(const TriangleMesh& mesh, std::size_t target_vertic
 }  // namespace
 
 TriangleMesh decimate(const TriangleMesh& mesh, std::size_t target_vertices, std::size_t* faces_rejected) {
-  TriangleMesh out;
-  if (mesh.vertices.size() >= kDecimateInHalvesMinVertices && mesh.vertices.size() >= 4 * target_vertices)
-    out = decimate_halves(mesh, target_vertices, faces_rejected);
-  else {
-    OMesh om;
-    fill_omesh(om, mesh, {}, faces_rejected);
-    out = collapse_to(om, target_vertices, even_edge_for(mesh, target_vertices), nullptr);
-  }
+  const bool halves = mesh.vertices.size() >= kDecimateInHalvesMinVertices && mesh.vertices.size() >= 4 * target_vertices;
+  TriangleMesh out = halves ? decimate_halves(mesh, target_vertices, faces_rejected)
+                            : decimate_in_one_pass(mesh, target_vertices, even_edge_for(mesh, target_vertices), faces_rejected);
   validate_mesh(out, "decimated mesh");
   return out;
 }
