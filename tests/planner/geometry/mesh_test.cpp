@@ -287,6 +287,30 @@ TEST(RoughModel, LargeMeshesDecimateInTwoHalvesKeepingTheTopologyForAnyThreadCou
   }
 }
 
+TEST(RoughModel, AMeshWithNoFaceBelowTheMedianStillDecimatesWholeToTheTarget) {
+  // The halves are cut at the faces' median along the longest side. A dense wall at that side's lower end
+  // holds most of the faces, so the median lies in the wall's plane and no face is below it: one half is
+  // empty (rough_model.cpp decimate_halves then makes one pass; the halves' code with an empty half gives the
+  // same). The mesh must still come out whole, at the target, the same for one thread or two.
+  TriangleMesh m;
+  testing::add_grid(m, Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ(), 151, 151, 1.0);  // x = 0
+  testing::add_grid(m, Eigen::Vector3d(0.0, 200.0, 0.0), Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY(), 401, 2, 1.0);  // to x = 400
+  ASSERT_GE(m.vertices.size(), kDecimateInHalvesMinVertices);
+  ASSERT_EQ(topology(m).euler, 2);  // two discs
+  RoughModelOptions o;
+  o.target_vertices = 2000;
+  RoughModel one, two;
+  tbb::task_arena(1).execute([&] { one = build_rough_model(m, o); });
+  tbb::task_arena(2).execute([&] { two = build_rough_model(m, o); });
+  EXPECT_EQ(one.points, two.points);
+  EXPECT_EQ(one.triangles, two.triangles);
+  const Topology t = topology(TriangleMesh{one.points, one.triangles});
+  EXPECT_EQ(one.size(), o.target_vertices);
+  EXPECT_EQ(t.euler, 2);
+  EXPECT_TRUE(t.manifold_edges);
+  EXPECT_GT(t.boundary_edges, 0u);
+}
+
 TEST(RoughModel, NormalNoiseIsSeededAndHasTheRequestedSigma) {
   const TriangleMesh m = testing::flat_patch(100.0, 1.0);  // 10201 vertices on z = 0
   RoughModelOptions o;
