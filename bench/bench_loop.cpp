@@ -4,7 +4,8 @@
 // replan for what is left, until done, stalled or jobs.max_rounds), then every executed view judged by the
 // analytic measurability test on the fine mesh's vertices with the plate, as a share of what the cell oracle
 // (bench/cell_oracle.hpp, in the cell's own space; the oracle along the normals alone beside it) reaches, and
-// the job's total views against the oracle's views to 99 %.
+// the job's total views against the oracle's views to 99 %, and where the loss lies: the reach no executed
+// view measures, by the state the job left the nearest rough row in, and how much of it faces the plate.
 //
 //   bench_loop [--meshes DIR] [--only a,b] [--rough-vertices N] [--refine-mm E] [--max-rounds N]
 //              [--placement auto|as_given] [--row-fraction F] [--normal-tolerance-mm T] [--footprint-samples K]
@@ -217,9 +218,61 @@ struct Judged {
   /// At equal completeness: the oracle's greedy views to the job's m_v of the reach, and a greedy cover of
   /// the job's own executed views to it (how many of them the job would have needed, had it known).
   std::size_t oracle_views_to_loop = 0, own_views_to_loop = 0;
+  /// Where the loop's loss lies (share of the oracle's reach the executed views do not measure, by the state the
+  /// job left the nearest rough row in): counted measured (the scans filled jobs.row_fraction of its footprint),
+  /// needs attention (given up), unmeasurable (no candidate of round 0 measures it, so no replan chases it), or
+  /// otherwise unmeasured (open).
+  double lost_in_measured = 0.0, lost_in_attention = 0.0, lost_in_unmeasurable = 0.0, lost_in_open = 0.0;
+  double lost_facing_down = 0.0;  // of the loss, surface facing the plate (n_z < -0.5 on the table)
 };
 
-Judged judge(Rig& rig, const Options& o, std::int64_t job, const sp::TriangleMesh& fine_mesh, const std::string& name) {
+/// Rough-model rows listed in a job's .xyz file (x y z first on each line): their indices in `rough`.
+std::vector<std::uint8_t> rows_listed(const sp::RoughModel& rough, const std::string& path) {
+  std::vector<std::uint8_t> out(rough.size(), 0);
+  std::ifstream f(path);
+  if (!f) std::fprintf(stderr, "the job's row file '%s' cannot be read: its rows count as measured in the loss split\n", path.c_str());
+  for (std::string line; std::getline(f, line);) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream ss(line);
+    Eigen::Vector3d p;
+    if (!(ss >> p.x() >> p.y() >> p.z())) continue;
+    std::size_t best = 0;
+    double best_d = 1e300;
+    for (std::size_t r = 0; r < rough.size(); ++r)
+      if (const double d = (rough.points[r] - p).squaredNorm(); d < best_d) best_d = d, best = r;
+    if (best_d < 1e-4) out[best] = 1;
+  }
+  return out;
+}
+
+/// Judged's loss by row state: each fine vertex of the oracle's reach that no executed view measures, by the
+/// state the job left its nearest rough row in (the job's unmeasured and needs-attention files, round 0's rows
+/// without a candidate), and whether it faces the plate.
+void add_loss_by_row_state(Judged& j, const sp::RoughModel& fine, const sp::MeasurabilityMatrix& mm, const sp::ViewPlan& plan,
+                           const sp::CellModel& placed, const nlohmann::json& result) {
+  std::vector<std::uint8_t> got(fine.size(), 0);
+  for (const auto& c : mm.columns) c.for_each([&](std::uint32_t r) { got[r] = 1; });
+  const auto unmeasured = rows_listed(plan.rough, result.value("unmeasured_file", std::string()));
+  const auto attention = rows_listed(plan.rough, result.value("needs_attention_file", std::string()));
+  std::vector<std::uint8_t> no_candidate(plan.rough.size(), 0);
+  for (const auto r : plan.cover.unmeasurable_rows) no_candidate[r] = 1;
+  for (std::size_t r = 0; r < fine.size(); ++r) {
+    if (!j.oracle.reach[r] || got[r]) continue;
+    std::size_t best = 0;
+    double best_d = 1e300;
+    for (std::size_t q = 0; q < plan.rough.size(); ++q)
+      if (const double d = (plan.rough.points[q] - fine.points[r]).squaredNorm(); d < best_d) best_d = d, best = q;
+    const double a = fine.area_mm2[r] / j.oracle.reach_area_mm2;
+    (attention[best]      ? j.lost_in_attention
+     : no_candidate[best] ? j.lost_in_unmeasurable
+     : unmeasured[best]   ? j.lost_in_open
+                          : j.lost_in_measured) += a;
+    if ((placed.object_on_table.linear() * fine.normals[r]).z() < -0.5) j.lost_facing_down += a;
+  }
+}
+
+Judged judge(Rig& rig, const Options& o, std::int64_t job, const sp::TriangleMesh& fine_mesh, const std::string& name,
+             const nlohmann::json& result) {
   Judged j;
   j.rounds = executed_views(*rig.journal, job);
   // The placement the job planned in (the planner is deterministic): the placed cell, for the plate and the
@@ -262,6 +315,7 @@ Judged judge(Rig& rig, const Options& o, std::int64_t job, const sp::TriangleMes
     const auto own_prog = scancell::bench::progression(mm, own.views, fine.area_mm2, j.oracle.reach, j.oracle.reach_area_mm2);
     j.own_views_to_loop = scancell::bench::views_to(own_prog, j.loop);
     j.oracle_views_to_loop = scancell::bench::views_to(j.oracle.progression, j.loop);
+    add_loss_by_row_state(j, fine, mm, plan, placed, result);
   }
   j.job_cell_time_s = scancell::bench::cell_time_s(placed, all);
   j.fine_rows = fine.size();
@@ -286,7 +340,8 @@ int main(int argc, char** argv) {
            "single_shot_m_v_reachable,loop_m_v_reachable,loop_views,loop_over_oracle_99,verified_mv,verified_mv_reachable,analytic_mv,"
            "round_gains_predicted_realized_mm2,rounds_under_20_percent,needs_attention_area_mm2,job_cell_time_s,oracle_cell_time_s,"
            "oracle_views_to_loop_m_v,own_views_to_loop_m_v,wall_s,normal_oracle_reachable,normal_oracle_views_99,"
-           "loop_m_v_normal_reachable,loop_over_normal_oracle_99\n";
+           "loop_m_v_normal_reachable,loop_over_normal_oracle_99,lost_in_measured_rows,lost_in_attention_rows,"
+           "lost_in_no_candidate_rows,lost_in_open_rows,lost_facing_down\n";
   }
   std::printf("closed loop on turntable-lift-tilt, placement %s, %zu rough rows, max_rounds %d, oracle 1 per %d fine vertices, %d threads\n",
               rig.models.settings.placement.automatic ? "auto" : "as_given", o.rough_vertices, o.max_rounds, o.oracle_decimation, o.threads);
@@ -304,7 +359,7 @@ int main(int argc, char** argv) {
     const dm::JobRecord rec = rig.journal->job(job);
     const nlohmann::json result = rec.result_json.empty() ? nlohmann::json::object() : nlohmann::json::parse(rec.result_json);
     Judged j;
-    arena.execute([&] { j = judge(rig, o, job, fine_mesh, obj.name); });
+    arena.execute([&] { j = judge(rig, o, job, fine_mesh, obj.name, result); });
     const CellOracle& oracle = j.oracle;
     std::string per_round;
     for (const auto& rv : j.rounds) per_round += (per_round.empty() ? "" : "+") + std::to_string(rv.size());
@@ -322,13 +377,13 @@ int main(int argc, char** argv) {
                std::to_string(std::lround(g.value("realized_gain_mm2", 0.0)));
     std::printf("%-16s %6zu %6.3f %4zu/%4zu/%4zu %-8s %-18s %8.4f %8.4f %6zu %6.2f %8.4f %8.4f %8.4f %9.0f %9.0f %7.0f  to the job's m_v: oracle %zu views, "
                 "the job's own %zu; along normals: reach %.3f views %zu/%zu/%zu m_v_r %.4f ratio %.2f; gains %s, weak rounds %s, "
-                "needs attention %.0f mm2: %s\n",
+                "needs attention %.0f mm2; lost by row state: measured %.4f attention %.4f no candidate %.4f open %.4f, facing down %.4f: %s\n",
                 obj.name.c_str(), j.fine_rows, oracle.reachable(), oracle.views_95, oracle.views_99, oracle.views_999,
                 dm::to_string(rec.state), per_round.c_str(), j.single, j.loop, j.views, ratio, verified,
                 verified / oracle.reachable(), j.analytic_mv, j.job_cell_time_s, oracle.cell_time_s, wall, j.oracle_views_to_loop,
                 j.own_views_to_loop, j.along_normal.reachable(), j.along_normal.views_95, j.along_normal.views_99,
                 j.along_normal.views_999, j.loop_normal, ratio_normal, gains.c_str(), weak.c_str(), attention,
-                rec.cause.c_str());
+                j.lost_in_measured, j.lost_in_attention, j.lost_in_unmeasurable, j.lost_in_open, j.lost_facing_down, rec.cause.c_str());
     std::fflush(stdout);
     if (csv)
       csv << obj.name << ',' << j.fine_rows << ',' << oracle.reachable() << ',' << oracle.views_95 << ',' << oracle.views_99
@@ -337,7 +392,8 @@ int main(int argc, char** argv) {
           << verified / oracle.reachable() << ',' << j.analytic_mv << ',' << gains << ',' << '"' << weak << '"' << ',' << attention << ','
           << j.job_cell_time_s << ',' << oracle.cell_time_s << ',' << j.oracle_views_to_loop << ',' << j.own_views_to_loop << ','
           << wall << ',' << j.along_normal.reachable() << ',' << j.along_normal.views_99 << ',' << j.loop_normal << ','
-          << ratio_normal << '\n';
+          << ratio_normal << ',' << j.lost_in_measured << ',' << j.lost_in_attention << ',' << j.lost_in_unmeasurable << ','
+          << j.lost_in_open << ',' << j.lost_facing_down << '\n';
   }
   if (o.keep_dir.empty()) fs::remove_all(rig.work);
   return 0;
