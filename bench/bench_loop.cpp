@@ -28,6 +28,7 @@
 #include <fstream>
 #include <functional>
 #include <iostream>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <set>
@@ -226,7 +227,16 @@ struct Judged {
   double lost_facing_down = 0.0;  // of the loss, surface facing the plate (n_z < -0.5 on the table)
 };
 
-/// Rough-model rows listed in a job's .xyz file (x y z first on each line): their indices in `rough`.
+/// The rough row nearest `p` and its squared distance (mm²); the lowest index among equally near rows. A
+/// plain scan: the bench asks this of the few hundred vertices a loop leaves and the rows it lists.
+std::pair<std::size_t, double> nearest_row(const sp::RoughModel& rough, const Eigen::Vector3d& p) {
+  std::pair<std::size_t, double> best{0, std::numeric_limits<double>::infinity()};
+  for (std::size_t r = 0; r < rough.size(); ++r)
+    if (const double d = (rough.points[r] - p).squaredNorm(); d < best.second) best = {r, d};
+  return best;
+}
+
+/// Rough-model rows listed in a job's .xyz file (x y z first on each line): one flag per row of `rough`.
 std::vector<std::uint8_t> rows_listed(const sp::RoughModel& rough, const std::string& path) {
   std::vector<std::uint8_t> out(rough.size(), 0);
   std::ifstream f(path);
@@ -236,11 +246,7 @@ std::vector<std::uint8_t> rows_listed(const sp::RoughModel& rough, const std::st
     std::istringstream ss(line);
     Eigen::Vector3d p;
     if (!(ss >> p.x() >> p.y() >> p.z())) continue;
-    std::size_t best = 0;
-    double best_d = 1e300;
-    for (std::size_t r = 0; r < rough.size(); ++r)
-      if (const double d = (rough.points[r] - p).squaredNorm(); d < best_d) best_d = d, best = r;
-    if (best_d < 1e-4) out[best] = 1;
+    if (const auto [r, d2] = nearest_row(rough, p); d2 < 1e-4) out[r] = 1;  // within 0.01 mm: the row written
   }
   return out;
 }
@@ -258,10 +264,7 @@ void add_loss_by_row_state(Judged& j, const sp::RoughModel& fine, const sp::Meas
   for (const auto r : plan.cover.unmeasurable_rows) no_candidate[r] = 1;
   for (std::size_t r = 0; r < fine.size(); ++r) {
     if (!j.oracle.reach[r] || got[r]) continue;
-    std::size_t best = 0;
-    double best_d = 1e300;
-    for (std::size_t q = 0; q < plan.rough.size(); ++q)
-      if (const double d = (plan.rough.points[q] - fine.points[r]).squaredNorm(); d < best_d) best_d = d, best = q;
+    const std::size_t best = nearest_row(plan.rough, fine.points[r]).first;
     const double a = fine.area_mm2[r] / j.oracle.reach_area_mm2;
     (attention[best]      ? j.lost_in_attention
      : no_candidate[best] ? j.lost_in_unmeasurable

@@ -261,6 +261,23 @@ TEST(RoughModel, DecimationKeepsTheTopology) {
   }
 }
 
+/// `mesh` decimated to `target` in a one- and a two-thread arena: the same rough model both times, exactly
+/// `target` rows, Euler characteristic `euler`, every edge manifold, and a rim when the surface is `open`.
+void expect_decimates_whole(const TriangleMesh& mesh, std::size_t target, long euler, bool open, const std::string& name) {
+  RoughModelOptions o;
+  o.target_vertices = target;
+  RoughModel one, two;
+  tbb::task_arena(1).execute([&] { one = build_rough_model(mesh, o); });
+  tbb::task_arena(2).execute([&] { two = build_rough_model(mesh, o); });
+  EXPECT_EQ(one.points, two.points) << name << " to " << target;
+  EXPECT_EQ(one.triangles, two.triangles) << name << " to " << target;
+  const Topology t = topology(TriangleMesh{one.points, one.triangles});
+  EXPECT_EQ(one.size(), target) << name;
+  EXPECT_EQ(t.euler, euler) << name << " to " << target;
+  EXPECT_TRUE(t.manifold_edges) << name << " to " << target;
+  EXPECT_EQ(t.boundary_edges > 0, open) << name << " to " << target;
+}
+
 TEST(RoughModel, LargeMeshesDecimateInTwoHalvesKeepingTheTopologyForAnyThreadCount) {
   // From 20k vertices the two halves of a mesh decimate at once, the vertices they share locked, and then
   // the band along that seam (rough_model.cpp decimate_halves). The surface must come out as whole as from
@@ -268,22 +285,10 @@ TEST(RoughModel, LargeMeshesDecimateInTwoHalvesKeepingTheTopologyForAnyThreadCou
   const TopologyCase cases[] = {{"sphere", testing::uv_sphere(Eigen::Vector3d::Zero(), 60.0, 150, 150), 2},
                         {"tube", cylinder_with_bore(80, 50, 50, 1.0), 0},
                         {"patch", testing::flat_patch(150.0, 1.0), 1}};
-  const std::size_t target = 2000;
   for (const auto& c : cases) {
     ASSERT_GE(c.mesh.vertices.size(), kDecimateInHalvesMinVertices) << c.name;
     ASSERT_EQ(topology(c.mesh).euler, c.euler) << c.name;
-    RoughModelOptions o;
-    o.target_vertices = target;
-    RoughModel one, two;
-    tbb::task_arena(1).execute([&] { one = build_rough_model(c.mesh, o); });
-    tbb::task_arena(2).execute([&] { two = build_rough_model(c.mesh, o); });
-    EXPECT_EQ(one.points, two.points) << c.name << " to " << target;
-    EXPECT_EQ(one.triangles, two.triangles) << c.name << " to " << target;
-    const Topology t = topology(TriangleMesh{one.points, one.triangles});
-    EXPECT_EQ(one.size(), target) << c.name;
-    EXPECT_EQ(t.euler, c.euler) << c.name << " to " << target;
-    EXPECT_TRUE(t.manifold_edges) << c.name << " to " << target;
-    EXPECT_EQ(t.boundary_edges > 0, c.euler == 1) << c.name << " to " << target;
+    expect_decimates_whole(c.mesh, 2000, c.euler, c.euler == 1, c.name);
   }
 }
 
@@ -297,18 +302,7 @@ TEST(RoughModel, AMeshWithNoFaceBelowTheMedianStillDecimatesWholeToTheTarget) {
   testing::add_grid(m, Eigen::Vector3d(0.0, 200.0, 0.0), Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY(), 401, 2, 1.0);  // to x = 400
   ASSERT_GE(m.vertices.size(), kDecimateInHalvesMinVertices);
   ASSERT_EQ(topology(m).euler, 2);  // two discs
-  RoughModelOptions o;
-  o.target_vertices = 2000;
-  RoughModel one, two;
-  tbb::task_arena(1).execute([&] { one = build_rough_model(m, o); });
-  tbb::task_arena(2).execute([&] { two = build_rough_model(m, o); });
-  EXPECT_EQ(one.points, two.points);
-  EXPECT_EQ(one.triangles, two.triangles);
-  const Topology t = topology(TriangleMesh{one.points, one.triangles});
-  EXPECT_EQ(one.size(), o.target_vertices);
-  EXPECT_EQ(t.euler, 2);
-  EXPECT_TRUE(t.manifold_edges);
-  EXPECT_GT(t.boundary_edges, 0u);
+  expect_decimates_whole(m, 2000, 2, true, "wall and strip");
 }
 
 TEST(RoughModel, NormalNoiseIsSeededAndHasTheRequestedSigma) {
