@@ -56,7 +56,10 @@ test-asan: deps
 #   the 40 min budget): Geometry.DeepCavityIsCoveredByThePlanner (the planner's path runs under ASan in every
 #   Plan.* test) and Plan.ASingleShotOnACellPredictsRowsByTheirFootprints (footprint.cpp runs under ASan in
 #   FootprintPrediction.*).
-ASAN_SKIP = ^(Geometry.DeepCavityIsCoveredByThePlanner|Plan.ASingleShotOnACellPredictsRowsByTheirFootprints|RoughModel.LargeMeshesDecimateInTwoHalvesKeepingTheTopologyForAnyThreadCount|RoughModel.AMeshWithNoFaceBelowTheMedianStillDecimatesWholeToTheTarget|SimCell.RegistrationPutsSamplesWhereTheyReallyAreUnderPoseError|Fusion.ThinAndConcaveShapesStayManifoldAndDecimateWithoutLosingFaces|SimCell.PlacementAutoStandsTheObjectSoTheCellMeasuresMore|SimCell.CubeJobMeasuresEverythingTheCellCanMeasure|SimCell.RowsPredictedTwiceAndNeverMeasuredAreRetiredNotChased|SimCell.FromABoundingBoxRoughScanThenPlanAndMeasure|SimCell.TwoSetupsTurnThePartOverAlignItAndMeasureWhatRestedOnThePlate|SimCell.ASetupThatCannotBeAlignedIsRefusedAndTheFirstSetupsProductKept)$$
+# - the positioner's calibration run (71 s under ASan, 60 s optimised; stop 34's CI took 40.6 min): the run
+#   machinery it shares (calibration/runs.cpp, the fit) runs under ASan in CalibrationCell.SensorRun… and
+#   CalibrationCell.TurntableAxisRun….
+ASAN_SKIP = ^(Geometry.DeepCavityIsCoveredByThePlanner|CalibrationCell.PositionerRunRecoversPoseErrorSigmas|Plan.ASingleShotOnACellPredictsRowsByTheirFootprints|RoughModel.LargeMeshesDecimateInTwoHalvesKeepingTheTopologyForAnyThreadCount|RoughModel.AMeshWithNoFaceBelowTheMedianStillDecimatesWholeToTheTarget|SimCell.RegistrationPutsSamplesWhereTheyReallyAreUnderPoseError|Fusion.ThinAndConcaveShapesStayManifoldAndDecimateWithoutLosingFaces|SimCell.PlacementAutoStandsTheObjectSoTheCellMeasuresMore|SimCell.CubeJobMeasuresEverythingTheCellCanMeasure|SimCell.RowsPredictedTwiceAndNeverMeasuredAreRetiredNotChased|SimCell.FromABoundingBoxRoughScanThenPlanAndMeasure|SimCell.TwoSetupsTurnThePartOverAlignItAndMeasureWhatRestedOnThePlate|SimCell.ASetupThatCannotBeAlignedIsRefusedAndTheFirstSetupsProductKept)$$
 
 # Every test under ASan+UBSan, the skipped ones included (not in CI): the five jobs alone were 730 s of test
 # time under ASan in stop 29's CI, the other three over a minute each.

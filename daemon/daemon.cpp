@@ -417,7 +417,11 @@ json Daemon::watch(const json& req, const std::function<bool(const json&)>& send
 json Daemon::pause_or_abort(const json& req, const std::string& cmd) {
   std::lock_guard<std::mutex> claim(claim_mu_);  // see job_loop: the job is claimed, or not yet, not between
   const JobRecord j = job_of(*journal_, req, cmd);
-  if (current_ == j.id) {
+  // The runner journals a job's end (aborted, paused, awaiting the operator, …) a moment before it lets go
+  // of current_: a request in between goes by the journal. A raised stop_ would be a reply of "at the next
+  // safe point" that nothing acts on (the next claim clears it), so an abort would be lost and a second
+  // abort accepted (seen in daemon_cli with ctest -j3).
+  if (current_ == j.id && (active(j.state) || j.state == JobState::queued)) {
     stop_ = static_cast<int>(cmd == "pause" ? StopRequest::pause : StopRequest::abort);
     return {{"job", j.id}, {"state", to_string(j.state)}, {"note", cmd + " at the next safe point (between moves or profiles)"}};
   }
