@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <set>
 #include <sstream>
 
@@ -222,6 +223,8 @@ void read_placement(Section s, PlacementSettings& pl) {
 void read_matrix(Section m, PlannerSettings& p) {
   p.matrix.ray_offset_mm = m.non_negative("ray_offset_mm", p.matrix.ray_offset_mm);
   p.cell_footprint_samples = m.ranged("cell_footprint_samples", p.cell_footprint_samples, 0, 64);
+  p.crease_footprint_samples = m.ranged("crease_footprint_samples", p.crease_footprint_samples, 0, 64);
+  p.crease_angle_rad = m.ranged("crease_angle_rad", p.crease_angle_rad, 0.1, std::numbers::pi / 2);
   if (m.has("countermeasures")) {
     const YAML::Node n = m.raw("countermeasures");
     if (n.IsScalar()) {

@@ -449,14 +449,16 @@ void record_views_by_samples(ViewPlan& p, const SampleCover& c, const RowFootpri
       p.predicted_gain_mm2 += p.rough.area_mm2[r];
     }
   // The cover lists the rows of its own matrix that no column holds: every footprint row (its samples stand
-  // in for it) and the samples no candidate measures. A footprint row is unmeasurable when all of its are.
+  // in for it) and the samples no candidate measures. A footprint row is unmeasurable when fewer of its
+  // samples than it needs are left: no set of views can finish it (a row of the plate-facing bottom whose
+  // footprint reaches a sliver of the side is not measured by the side's views).
   std::vector<std::uint32_t> unseen(f.size(), 0), unmeasurable;
   for (auto r : p.cover.unmeasurable_rows) {
     if (r >= c.n_rows) ++unseen[c.owner[r - c.n_rows]];
     else if (!std::binary_search(f.rows.begin(), f.rows.end(), r)) unmeasurable.push_back(r);
   }
   for (std::size_t k = 0; k < f.size(); ++k)
-    if (unseen[k] == f.first[k + 1] - f.first[k]) unmeasurable.push_back(f.rows[k]);
+    if (f.first[k + 1] - f.first[k] - unseen[k] < f.needed[k]) unmeasurable.push_back(f.rows[k]);
   std::sort(unmeasurable.begin(), unmeasurable.end());
   p.cover.unmeasurable_rows = unmeasurable;
 }
@@ -510,14 +512,22 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     }
     const std::vector<double> row_weight = row_weights(p.rough, measured_rows, row_weight_scale);
     // The rows predicted by footprint samples: a replan's open rows, by what they lack (the caller's measured
-    // coverage); or, in a single shot on a cell when matrix.cell_footprint_samples says so, every row by its
-    // whole footprint. Only a replan's also get candidates aimed at them (the stage's `footprints`): for every
-    // row of a single shot those are five more per row, and 13-14 s more of plan for 5k rows (docs/quality.md).
+    // coverage); or, in a single shot on a cell, every row by its whole footprint when
+    // matrix.cell_footprint_samples says so, else the rows on a crease (matrix.crease_footprint_samples). Only a
+    // replan's also get candidates aimed at them (the stage's `footprints`): for every row of a single shot
+    // those are five more per row, and 13-14 s more of plan for 5k rows (docs/quality.md).
     RowFootprints whole;
     const RowFootprints* predicted_by = footprints;
-    if (!footprints && p.cell && settings.cell_footprint_samples > 0 && !measured_rows) {
-      whole = whole_row_footprints(p.rough, spec, static_cast<std::size_t>(settings.cell_footprint_samples));
-      predicted_by = &whole;
+    if (!footprints && p.cell && !measured_rows) {
+      if (settings.cell_footprint_samples > 0) {
+        whole = whole_row_footprints(p.rough, spec, static_cast<std::size_t>(settings.cell_footprint_samples));
+      } else if (settings.crease_footprint_samples > 0) {
+        // Free space keeps the vertex test: there the margin does the rows' work, and crease samples cost the
+        // fandisk and the box 0.008-0.019 of their m_v (docs/quality.md).
+        whole = MeasuredCoverage(p.rough, spec)
+                    .open_footprints(crease_rows(p.rough, settings.crease_angle_rad), static_cast<std::size_t>(settings.crease_footprint_samples));
+      }
+      if (!whole.rows.empty()) predicted_by = &whole;
     }
     if (footprints) {
       footprints->validate(static_cast<std::uint32_t>(p.rough.size()));
@@ -622,7 +632,9 @@ json settings_json(const ViewPlan& p) {
                 {"local_search_iterations", p.settings.cover.local_search_iterations},
                 {"local_search_stall_work", p.settings.cover.local_search_stall_work},
                 {"local_search_time_limit_s", p.settings.cover.local_search_time_limit_s}}},
-              {"matrix", {{"ray_offset_mm", p.settings.matrix.ray_offset_mm}, {"cell_footprint_samples", p.settings.cell_footprint_samples}}}};
+              {"matrix", {{"ray_offset_mm", p.settings.matrix.ray_offset_mm}, {"cell_footprint_samples", p.settings.cell_footprint_samples},
+                          {"crease_footprint_samples", p.settings.crease_footprint_samples},
+                          {"crease_angle_rad", p.settings.crease_angle_rad}}}};
   {
     const Countermeasures& cm = p.settings.matrix.countermeasures;
     out["matrix"]["countermeasures"] = {{"frustum_detune", cm.frustum_detune},

@@ -293,6 +293,24 @@ std::vector<Eigen::Vector3d> area_weighted_normals(const TriangleMesh& mesh) {
   return n;
 }
 
+std::vector<std::uint32_t> crease_rows(const RoughModel& rough, double min_angle_rad) {
+  const double cos_max = std::cos(min_angle_rad);
+  std::vector<std::uint8_t> crease(rough.size(), 0);
+  for (std::size_t r = 0; r < rough.size(); ++r) crease[r] = rough.normals[r].squaredNorm() == 0.0;
+  for (const auto& t : rough.triangles) {
+    const Eigen::Vector3d& a = rough.points[t[0]];
+    const Eigen::Vector3d fn = (rough.points[t[1]] - a).cross(rough.points[t[2]] - a);
+    const double len = fn.norm();
+    if (len == 0.0) continue;  // a degenerate triangle has no direction to differ by
+    for (auto v : t)
+      if (fn.dot(rough.normals[v]) < cos_max * len) crease[v] = 1;
+  }
+  std::vector<std::uint32_t> out;
+  for (std::uint32_t r = 0; r < crease.size(); ++r)
+    if (crease[r]) out.push_back(r);
+  return out;
+}
+
 RoughModel make_rough_model(const TriangleMesh& mesh, const std::vector<int>& labels, const std::vector<std::uint8_t>& hypothetical) {
   check_label_count(labels, mesh.vertices.size());
   const std::size_t n = mesh.vertices.size();

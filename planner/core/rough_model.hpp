@@ -66,4 +66,9 @@ RoughModel make_rough_model(const TriangleMesh& mesh, const std::vector<int>& la
 /// Area-weighted unit vertex normals (unnormalised face normals summed; their length is twice the area).
 std::vector<Eigen::Vector3d> area_weighted_normals(const TriangleMesh& mesh);
 
+/// Rows on a crease (issue 15): some adjacent triangle's normal lies more than `min_angle_rad` from the row's
+/// own normal (and every row without a normal). There the vertex normal is a bisector no surface has: a box's
+/// edge or corner, a hole's rim, the floor of a pocket where it meets the wall. Ascending.
+std::vector<std::uint32_t> crease_rows(const RoughModel& rough, double min_angle_rad);
+
 }  // namespace scancell::planner

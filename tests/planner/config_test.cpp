@@ -130,6 +130,17 @@ TEST(Config, MissingFileAndBadPlannerSettings) {
   }
   std::ofstream(p) << "matrix:\n  cell_footprint_samples: 8\n";
   EXPECT_EQ(load_planner_settings(p).cell_footprint_samples, 8);
+  // A crease angle of 2 rad (115°) would take no row at all: refused, naming the key and the value.
+  std::ofstream(p) << "matrix:\n  crease_angle_rad: 2\n";
+  try {
+    load_planner_settings(p);
+    ADD_FAILURE() << "accepted crease_angle_rad 2";
+  } catch (const ConfigError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("matrix.crease_angle_rad: must be in [0.1, 1.5708], got 2"));
+  }
+  std::ofstream(p) << "matrix:\n  crease_footprint_samples: 0\n  crease_angle_rad: 0.5\n";
+  EXPECT_EQ(load_planner_settings(p).crease_footprint_samples, 0);
+  EXPECT_DOUBLE_EQ(load_planner_settings(p).crease_angle_rad, 0.5);
   // placement: the limits declared once (PlacementSettings) are what the loader refuses with.
   std::ofstream(p) << "placement:\n  mode: auto\n  candidates: 30\n";
   try {
