@@ -86,6 +86,9 @@ struct JobSettings {
   planner::IcpOptions icp = [] {
     planner::IcpOptions o;
     o.partial = true;  // a face-on view registers in what its shape fixes; the rest stays as positioned
+    // The pose error bound (max_distance_mm) at the lever: 2.9°, 58× the demo cell's σ_a and 6× issue 9's
+    // 0.5°. A view turned farther is a patch that does not fix its pose, refused rather than counted.
+    o.max_turn_rad = o.max_distance_mm / o.lever_mm;
     return o;
   }();
   std::filesystem::path jobs_dir;                  // per-job outputs (coverage picture, unmeasured rows)

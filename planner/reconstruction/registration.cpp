@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
+#include <numbers>
 #include <stdexcept>
 
 #include <Eigen/Dense>
@@ -330,6 +332,13 @@ void limit_step(Vec6& x, const std::vector<Eigen::Vector3d>& lever, const IcpOpt
   if (turn > 0.05) x *= 0.05 / turn;
 }
 
+/// An angle in degrees, to 0.1°.
+std::string fmt_deg(double rad) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.1f", rad * 180.0 / std::numbers::pi);
+  return b;
+}
+
 /// The converged correction's account: how far it moves the samples, refused when farther than the positioner
 /// can err (a slide along a weakly fixed direction: a face with a sliver of another, not the pose error).
 void accept(const IcpSamples& s, const Eigen::Matrix3d& w, const Eigen::Vector3d& d, const IcpOptions& o, IcpResult& r) {
@@ -348,6 +357,13 @@ void accept(const IcpSamples& s, const Eigen::Matrix3d& w, const Eigen::Vector3d
     r.why = "the correction moves samples " + std::to_string(farthest) + " mm, beyond the pose error bound of " +
             std::to_string(o.max_distance_mm) + " mm (a slide along a weakly fixed direction; conditioning " +
             std::to_string(r.conditioning) + ")";
+    return;
+  }
+  const double turn = Eigen::AngleAxisd(w).angle();
+  if (turn > o.max_turn_rad) {
+    r.why = "the correction turns the view " + fmt_deg(turn) + "°, beyond the pose error bound of " + fmt_deg(o.max_turn_rad) +
+            "° (a fit the patch's shape lets settle turned; conditioning " + std::to_string(r.conditioning) + ", " +
+            std::to_string(r.free_directions) + " directions free)";
     return;
   }
   r.ok = true;

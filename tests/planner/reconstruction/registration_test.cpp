@@ -62,6 +62,34 @@ TEST(Registration, UndoesAKnownPoseErrorOnACubeCorner) {
   EXPECT_GT(r.conditioning, 3 * IcpOptions{}.min_conditioning);
 }
 
+/// A turn the positioner cannot make is refused, not applied: the same corner turned 5° about its own middle
+/// (samples move at most 4.4 mm, inside the pairing distance) registers back to within 0.05° unbounded, and
+/// with IcpOptions::max_turn_rad 2° the fit is refused, naming the turn it found.
+TEST(Registration, ATurnBeyondWhatThePositionerCanErrIsRefused) {
+  const TriangleMesh cube = load_mesh(testing::source_path("tests/data/cube50.off"));
+  const ModelCloud model = ModelCloud::from_mesh(cube, 1.0);
+  const auto pts = scan(cube, {50, 50, 50}, Eigen::Vector3d(50, 50, 50) + 200.0 * Eigen::Vector3d(1, 1, 1).normalized());
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  for (const auto& p : pts) centroid += p / static_cast<double>(pts.size());
+  Eigen::Isometry3d err = Eigen::Isometry3d::Identity();
+  err.translate(centroid).rotate(Eigen::AngleAxisd(5.0 * kDeg, Eigen::Vector3d(1, -1, 0).normalized())).translate(-centroid);
+  std::vector<Eigen::Vector3d> seen;
+  double farthest = 0.0;
+  for (const auto& p : pts) {
+    seen.push_back(err * p);
+    farthest = std::max(farthest, (seen.back() - p).norm());
+  }
+  ASSERT_LT(farthest, IcpOptions{}.max_distance_mm);
+  const IcpResult free = register_points(seen, model);
+  ASSERT_TRUE(free.ok) << free.why;
+  EXPECT_LT(Eigen::AngleAxisd((free.correction * err).linear()).angle(), 0.05 * kDeg);
+  IcpOptions bounded;
+  bounded.max_turn_rad = 2.0 * kDeg;
+  const IcpResult r = register_points(seen, model, bounded);
+  EXPECT_FALSE(r.ok);
+  EXPECT_THAT(r.why, HasSubstr("turns the view 5.0°, beyond the pose error bound of 2.0°"));
+}
+
 /// Plate motions only (a part resting on a plate, issue 20): a turn about the table axis and a shift on the
 /// plate are undone; a tilt and a lift the points also carry are left exactly as they were (the plate fixes
 /// them, so the fit must not trade them against noise); pivots are refused.
