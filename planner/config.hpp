@@ -55,7 +55,8 @@ struct PlannerSettings {
   /// the vertex. A crease row's bisector normal (a box's edge, a hole's rim, a pocket's floor by its wall)
   /// faces no surface that is there: views that measure both faces fail it, and the cover spent views on
   /// those rows alone (docs/quality.md: the box with a blind hole 39 views, 1.44× the cell oracle; by 4
-  /// samples 30). Off by default until registration holds on the plans it makes (docs/quality.md, session 25).
+  /// samples 30). Off by default: split into samples, a box's edge rows no longer let views of two faces
+  /// overlap, and the registration constraint (eq. 4.2) leaves a face unplanned (docs/quality.md, session 26).
   int crease_footprint_samples = 0;
   double crease_angle_rad = 0.6981317007977318;  // 40°: every 90° edge, however its faces weigh the normal
   std::uint64_t seed = 1;
