@@ -25,7 +25,9 @@
 #include <coin/CoinPackedMatrix.hpp>
 #include <coin/OsiClpSolverInterface.hpp>
 
+#include "common/binary.hpp"
 #include "common/errors.hpp"
+#include "common/worker_process.hpp"
 
 namespace scancell::planner {
 namespace {
@@ -124,7 +126,7 @@ struct Problem {
   }
 };
 
-// ---- worker side (runs in the forked child; only CBC, plain memory and write(2)) ----
+// ---- worker side (runs in the worker process, common/worker_process.hpp) ----
 
 void send(int fd, const std::string& line) {
   const char* p = line.data();
@@ -566,25 +568,115 @@ void warm_start(Problem& P, const Reduction& red, const CoverResult& greedy) {
   if (!P.covers_all(P.warm.data())) P.warm.clear();  // cannot happen; never hand CBC a wrong start
 }
 
-/// Runs CBC in a forked worker until it ends or the deadline passes, taking every improving cover it reports;
-/// returns how it ended. The worker is killed at the deadline (CBC's own limit is not trusted to hold).
+// ---- the worker's input: the problem, whole (the worker is a fresh process, common/worker_process.hpp) ----
+
+template <class T>
+void put_all(std::string& out, const std::vector<T>& v) {
+  append_binary<std::uint64_t>(out, v.size());
+  for (const T& x : v) append_binary<T>(out, x);
+}
+
+/// Reads what encode_problem wrote; a short or inconsistent input throws (the worker then ends without an answer).
+class Reader {
+ public:
+  explicit Reader(const std::string& s) : s_(s) {}
+  template <class T>
+  T get() {
+    if (at_ + sizeof(T) > s_.size()) throw std::runtime_error("exact_cover worker: truncated input");
+    T v;
+    std::memcpy(&v, s_.data() + at_, sizeof v);
+    at_ += sizeof v;
+    return v;
+  }
+  template <class T>
+  std::vector<T> get_all() {
+    const auto n = get<std::uint64_t>();
+    if (n > (s_.size() - at_) / sizeof(T)) throw std::runtime_error("exact_cover worker: inconsistent input");
+    std::vector<T> v(n);
+    for (auto& x : v) x = get<T>();
+    return v;
+  }
+  bool done() const { return at_ == s_.size(); }
+
+ private:
+  const std::string& s_;
+  std::size_t at_ = 0;
+};
+
+std::string encode_problem(const Problem& P, double seconds_left) {
+  std::string out;
+  append_binary<std::uint32_t>(out, P.m->n_rows);
+  append_binary<std::uint64_t>(out, P.m->n_cols());
+  for (const auto& c : P.m->columns) put_all(out, c.rows());
+  put_all(out, *P.w);
+  append_binary<std::uint8_t>(out, static_cast<std::uint8_t>(P.st->normalizer));
+  append_binary<double>(out, P.st->registration_threshold);
+  put_all(out, P.cost);
+  put_all(out, P.ilp_col);
+  append_binary<std::uint64_t>(out, P.rows.size());
+  for (const auto& r : P.rows) put_all(out, r);
+  put_all(out, P.forced);
+  put_all(out, P.warm);
+  append_binary<std::uint8_t>(out, P.registration);
+  append_binary<std::uint8_t>(out, P.core);
+  append_binary<double>(out, P.forced_cost);
+  append_binary<double>(out, seconds_left);
+  return out;
+}
+
+constexpr const char* kWorkerKind = "exact-cover";
+
+/// The worker's side: rebuilds the problem from stdin and solves it until its time is up.
+int worker_main(int out_fd, const std::string&) try {
+  const std::string input = read_worker_input();
+  Reader in(input);
+  MeasurabilityMatrix m;
+  m.n_rows = in.get<std::uint32_t>();
+  m.columns.resize(in.get<std::uint64_t>());
+  for (auto& c : m.columns) c = MeasurabilityColumn(in.get_all<std::uint32_t>(), m.n_rows);
+  const std::vector<double> w = in.get_all<double>();
+  CoverSettings st;
+  st.normalizer = static_cast<RegistrationNormalizer>(in.get<std::uint8_t>());
+  st.registration_threshold = in.get<double>();
+  Problem P;
+  P.m = &m;
+  P.w = &w;
+  P.st = &st;
+  P.cost = in.get_all<double>();
+  P.ilp_col = in.get_all<std::uint32_t>();
+  P.rows.resize(in.get<std::uint64_t>());
+  for (auto& r : P.rows) r = in.get_all<int>();
+  P.forced = in.get_all<std::uint32_t>();
+  P.warm = in.get_all<double>();
+  P.registration = in.get<std::uint8_t>() != 0;
+  P.core = in.get<std::uint8_t>() != 0;
+  P.forced_cost = in.get<double>();
+  const double seconds_left = in.get<double>();
+  if (!in.done() || w.size() != m.n_rows || P.cost.size() != m.n_cols()) throw std::runtime_error("exact_cover worker: inconsistent input");
+  P.ilp_of.assign(m.n_cols(), -1);
+  for (std::size_t j = 0; j < P.ilp_col.size(); ++j) P.ilp_of.at(P.ilp_col[j]) = static_cast<std::int64_t>(j);
+  P.cols_of.assign(m.n_rows, {});
+  for (std::uint32_t j = 0; j < m.n_cols(); ++j) m.columns[j].for_each([&](std::uint32_t r) { P.cols_of[r].push_back(j); });
+  run_worker(P, out_fd, Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(seconds_left)));
+} catch (const std::exception& e) {
+  send(out_fd, std::string("E the solver's worker failed: ") + e.what() + "\n");
+  return 2;
+}
+
+// In an exact-cover worker this solves the problem on stdin and ends the process before main().
+[[maybe_unused]] const bool worker_started = run_if_worker(kWorkerKind, &worker_main);
+
+/// Runs CBC in a worker process until it ends or the deadline passes, taking every improving cover it reports;
+/// returns how it ended. The worker is killed at the deadline (CBC's own limit is not trusted to hold). It is
+/// this executable started afresh with the problem on its stdin, not a fork: a fork of this multithreaded
+/// process could inherit a lock another thread held at that instant (common/worker_process.hpp).
 std::string solve_in_worker(const Problem& P, Clock::time_point deadline, ExactReport& rep,
                             const std::function<void(std::vector<std::uint32_t>, double)>& take) {
   std::string end_status;
-  int fds[2];
-  if (::pipe(fds) != 0) throw std::runtime_error(std::string("exact_cover: pipe: ") + std::strerror(errno));
-  std::fflush(nullptr);
-  const pid_t pid = ::fork();
-  if (pid < 0) {
-    ::close(fds[0]);
-    ::close(fds[1]);
-    throw std::runtime_error(std::string("exact_cover: fork: ") + std::strerror(errno));
-  }
-  if (pid == 0) {
-    ::close(fds[0]);
-    run_worker(P, fds[1], deadline);
-  }
-  ::close(fds[1]);
+  const double seconds_left = std::chrono::duration<double>(deadline - Clock::now()).count();
+  const SpawnedWorker worker = spawn_worker(kWorkerKind, "", encode_problem(P, seconds_left));
+  const pid_t pid = worker.pid;
+  const int rd = worker.read_fd;
   std::string buf;
   bool done = false;
   auto handle = [&](const std::string& line) {
@@ -613,12 +705,12 @@ std::string solve_in_worker(const Problem& P, Clock::time_point deadline, ExactR
   while (!done) {
     const double left_ms = std::chrono::duration<double, std::milli>(deadline - Clock::now()).count() + 250.0;
     if (left_ms <= 0.0) break;
-    pollfd pfd{fds[0], POLLIN, 0};
+    pollfd pfd{rd, POLLIN, 0};
     const int pr = ::poll(&pfd, 1, static_cast<int>(std::min(left_ms, 1000.0)));
     if (pr < 0 && errno == EINTR) continue;
     if (pr <= 0) continue;
     char chunk[65536];
-    const ssize_t n = ::read(fds[0], chunk, sizeof chunk);
+    const ssize_t n = ::read(rd, chunk, sizeof chunk);
     if (n <= 0) break;  // worker exited (or died)
     buf.append(chunk, static_cast<std::size_t>(n));
     for (std::size_t nl; (nl = buf.find('\n')) != std::string::npos;) {
@@ -630,7 +722,7 @@ std::string solve_in_worker(const Problem& P, Clock::time_point deadline, ExactR
   int status = 0;
   while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
   }
-  ::close(fds[0]);
+  ::close(rd);
   if (end_status.empty()) end_status = done ? "time limit" : "time limit (solver stopped)";
   return end_status;
 }

@@ -10,9 +10,7 @@
 #include <fstream>
 #include <chrono>
 #include <cerrno>
-#include <cstring>
 
-#include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
 #include <sys/wait.h>
@@ -25,6 +23,7 @@
 #include <assimp/scene.h>
 
 #include "common/errors.hpp"
+#include "common/worker_process.hpp"
 
 namespace scancell::planner {
 namespace {
@@ -189,6 +188,24 @@ std::string import_to_bytes(const std::string& name) {
   return out;
 }
 
+constexpr const char* kReaderKind = "mesh-reader";
+
+/// The worker's side: the import's outcome, whole, on `out_fd`.
+int reader_main(int out_fd, const std::string& name) {
+  const std::string out = import_to_bytes(name);
+  std::size_t done = 0;
+  while (done < out.size()) {
+    const ssize_t n = ::write(out_fd, out.data() + done, out.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) return 3;
+    done += static_cast<std::size_t>(n);
+  }
+  return 0;
+}
+
+// In a mesh-reader worker this reads the file and ends the process before main() (common/worker_process.hpp).
+[[maybe_unused]] const bool reader_started = run_if_worker(kReaderKind, &reader_main);
+
 }  // namespace
 
 TriangleMesh load_mesh(const std::filesystem::path& path, MeshLoadReport* report, std::chrono::milliseconds time_limit,
@@ -202,30 +219,18 @@ TriangleMesh load_mesh(const std::filesystem::path& path, MeshLoadReport* report
 
   refuse_non_finite_tokens(name);
 
-  // Untrusted files are parsed in a child process with a time limit: assimp's PLY reader loops for ever on a
+  // Untrusted files are parsed in a worker process with a time limit: assimp's PLY reader loops for ever on a
   // misspelt end_header (tests/data/bad/ply-header-typo-hang.ply), and a crash in a parser must not take
-  // the daemon with it. The child is single-threaded and never takes the importer mutex (another thread of
-  // the parent may hold it at the fork); only async-signal-safe calls follow the fork until the import.
-  int fds[2];
-  if (::pipe2(fds, O_CLOEXEC) != 0) throw MeshError(name + ": cannot start the mesh reader: " + std::strerror(errno));
-  const pid_t pid = ::fork();
-  if (pid < 0) {
-    ::close(fds[0]);
-    ::close(fds[1]);
-    throw MeshError(name + ": cannot start the mesh reader: " + std::strerror(errno));
+  // the daemon with it. The worker is this executable started afresh, not a fork: a fork of this
+  // multithreaded process could inherit a lock another thread held (common/worker_process.hpp).
+  SpawnedWorker worker;
+  try {
+    worker = spawn_worker(kReaderKind, name);
+  } catch (const std::exception& e) {
+    throw MeshError(name + ": " + e.what());
   }
-  if (pid == 0) {
-    ::close(fds[0]);
-    const std::string out = import_to_bytes(name);
-    std::size_t done = 0;
-    while (done < out.size()) {
-      const ssize_t n = ::write(fds[1], out.data() + done, out.size() - done);
-      if (n <= 0) _exit(3);
-      done += static_cast<std::size_t>(n);
-    }
-    _exit(0);
-  }
-  ::close(fds[1]);
+  const pid_t pid = worker.pid;
+  const int rd = worker.read_fd;
   std::string bytes;
   const auto deadline = std::chrono::steady_clock::now() + time_limit;
   bool timed_out = false, cancelled = false;
@@ -240,16 +245,16 @@ TriangleMesh load_mesh(const std::filesystem::path& path, MeshLoadReport* report
       cancelled = true;
       break;
     }
-    pollfd p{fds[0], POLLIN, 0};
+    pollfd p{rd, POLLIN, 0};
     const int r = ::poll(&p, 1, static_cast<int>(std::min<long long>(left.count(), cancel ? 50 : 1000)));
     if (r < 0 && errno == EINTR) continue;
     if (r <= 0) continue;
-    const ssize_t n = ::read(fds[0], buf, sizeof buf);
+    const ssize_t n = ::read(rd, buf, sizeof buf);
     if (n < 0 && errno == EINTR) continue;
     if (n <= 0) break;
     bytes.append(buf, static_cast<std::size_t>(n));
   }
-  ::close(fds[0]);
+  ::close(rd);
   if (timed_out || cancelled) ::kill(pid, SIGKILL);
   int status = 0;
   while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {

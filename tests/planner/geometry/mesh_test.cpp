@@ -7,6 +7,10 @@
 #include <chrono>
 #include <map>
 #include <set>
+#include <thread>
+
+#include <pthread.h>
+#include <unistd.h>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -78,6 +82,37 @@ TEST(MeshLoad, AReaderThatNeverFinishesIsStoppedAtTheTimeLimit) {
   const TriangleMesh m = load_mesh(testing::source_path("tests/data/mushroom.off"), &rep);
   EXPECT_EQ(m.vertices.size(), 2337u);
   EXPECT_EQ(rep.file_faces, m.triangles.size() + rep.degenerate_dropped);
+}
+
+// A fork of this multithreaded process would inherit every lock another thread held at that instant and could
+// wait on it for ever: a reader hung 30 s this way in an ASan CI. The reader is this executable started afresh.
+// A pthread_atfork child handler, which runs only in a forked child, stands in for such a lock here.
+std::atomic<bool> g_fork_trap{false};
+
+TEST(MeshLoad, TheReaderIsAFreshProcessNotAForkOfTheCaller) {
+  static const int registered = ::pthread_atfork(nullptr, nullptr, [] {
+    if (g_fork_trap.load()) ::_exit(97);
+  });
+  ASSERT_EQ(registered, 0);
+  g_fork_trap = true;
+  // Two threads read at once, as two daemon jobs may: each gets its own file's answer.
+  std::size_t mushroom = 0, hang_refused = 0;
+  std::thread other([&] {
+    try {
+      load_mesh(testing::source_path("tests/data/bad/ply-header-typo-hang.ply"), nullptr, std::chrono::milliseconds(800));
+    } catch (const MeshError& e) {
+      hang_refused = std::string(e.what()).find("did not finish within") != std::string::npos;
+    }
+  });
+  try {
+    mushroom = load_mesh(testing::source_path("tests/data/mushroom.off")).vertices.size();
+  } catch (const MeshError& e) {
+    ADD_FAILURE() << e.what();
+  }
+  other.join();
+  g_fork_trap = false;
+  EXPECT_EQ(mushroom, 2337u);
+  EXPECT_EQ(hang_refused, 1u);
 }
 
 TEST_F(TempDir, RefusesMissingFile) {
