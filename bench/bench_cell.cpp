@@ -132,8 +132,8 @@ Row judge(const sp::TriangleMesh& fine_mesh, const std::optional<sp::CellModel>&
   row.plan_s = scancell::seconds_since(t0);
   row.stages = plan.times;
   // The fine mesh's rows, in the plan's object frame, with the plate.
-  const sp::RoughModel fine = sp::make_rough_model(fine_mesh);
-  sp::TriangleMesh scene_mesh = fine.mesh();
+  const sp::RoughModel fine = scancell::bench::judge_model(fine_mesh);
+  sp::TriangleMesh scene_mesh = fine_mesh;
   if (plan.cell) sp::append_mesh(scene_mesh, sp::fixture_mesh(*plan.cell));
   const sp::OcclusionScene scene(scene_mesh);
   row.oracle = bench::cell_oracle(fine_mesh, fine, scene, sensor, spec, plan.cell ? &*plan.cell : nullptr, o.oracle_decimation,

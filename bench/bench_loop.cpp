@@ -225,6 +225,8 @@ struct Judged {
   /// otherwise unmeasured (open).
   double lost_in_measured = 0.0, lost_in_attention = 0.0, lost_in_unmeasurable = 0.0, lost_in_open = 0.0;
   double lost_facing_down = 0.0;  // of the loss, surface facing the plate (n_z < -0.5 on the table)
+  /// Of the loss, the rows judge_model adds for the fine vertices on a crease (each judged by one face).
+  double lost_on_crease = 0.0;
 };
 
 /// The rough row nearest `p` and its squared distance (mm²); the lowest index among equally near rows. A
@@ -254,8 +256,8 @@ std::vector<std::uint8_t> rows_listed(const sp::RoughModel& rough, const std::st
 /// Judged's loss by row state: each fine vertex of the oracle's reach that no executed view measures, by the
 /// state the job left its nearest rough row in (the job's unmeasured and needs-attention files, round 0's rows
 /// without a candidate), and whether it faces the plate.
-void add_loss_by_row_state(Judged& j, const sp::RoughModel& fine, const sp::MeasurabilityMatrix& mm, const sp::ViewPlan& plan,
-                           const sp::CellModel& placed, const nlohmann::json& result) {
+void add_loss_by_row_state(Judged& j, const sp::RoughModel& fine, std::size_t vertex_rows, const sp::MeasurabilityMatrix& mm,
+                           const sp::ViewPlan& plan, const sp::CellModel& placed, const nlohmann::json& result) {
   std::vector<std::uint8_t> got(fine.size(), 0);
   for (const auto& c : mm.columns) c.for_each([&](std::uint32_t r) { got[r] = 1; });
   const auto unmeasured = rows_listed(plan.rough, result.value("unmeasured_file", std::string()));
@@ -271,6 +273,7 @@ void add_loss_by_row_state(Judged& j, const sp::RoughModel& fine, const sp::Meas
      : unmeasured[best]   ? j.lost_in_open
                           : j.lost_in_measured) += a;
     if ((placed.object_on_table.linear() * fine.normals[r]).z() < -0.5) j.lost_facing_down += a;
+    if (r >= vertex_rows) j.lost_on_crease += a;
   }
 }
 
@@ -293,8 +296,8 @@ Judged judge(Rig& rig, const Options& o, std::int64_t job, const sp::TriangleMes
   if (j.rounds.empty() || j.rounds.front().size() != plan.views.size())
     std::fprintf(stderr, "%s: round 0 executed %zu views, the bench's plan has %zu (placement or plan differ)\n", name.c_str(),
                  j.rounds.empty() ? std::size_t{0} : j.rounds.front().size(), plan.views.size());
-  const sp::RoughModel fine = sp::make_rough_model(fine_mesh);
-  sp::TriangleMesh scene_mesh = fine.mesh();
+  const sp::RoughModel fine = scancell::bench::judge_model(fine_mesh);
+  sp::TriangleMesh scene_mesh = fine_mesh;
   sp::append_mesh(scene_mesh, sp::fixture_mesh(placed));
   const sp::OcclusionScene scene(scene_mesh);
   j.oracle = scancell::bench::cell_oracle(fine_mesh, fine, scene, m.sensor, m.spec, &placed, o.oracle_decimation,
@@ -318,7 +321,7 @@ Judged judge(Rig& rig, const Options& o, std::int64_t job, const sp::TriangleMes
     const auto own_prog = scancell::bench::progression(mm, own.views, fine.area_mm2, j.oracle.reach, j.oracle.reach_area_mm2);
     j.own_views_to_loop = scancell::bench::views_to(own_prog, j.loop);
     j.oracle_views_to_loop = scancell::bench::views_to(j.oracle.progression, j.loop);
-    add_loss_by_row_state(j, fine, mm, plan, placed, result);
+    add_loss_by_row_state(j, fine, fine_mesh.vertices.size(), mm, plan, placed, result);
   }
   j.job_cell_time_s = scancell::bench::cell_time_s(placed, all);
   j.fine_rows = fine.size();
@@ -344,7 +347,7 @@ int main(int argc, char** argv) {
            "round_gains_predicted_realized_mm2,rounds_under_20_percent,needs_attention_area_mm2,job_cell_time_s,oracle_cell_time_s,"
            "oracle_views_to_loop_m_v,own_views_to_loop_m_v,wall_s,normal_oracle_reachable,normal_oracle_views_99,"
            "loop_m_v_normal_reachable,loop_over_normal_oracle_99,lost_in_measured_rows,lost_in_attention_rows,"
-           "lost_in_no_candidate_rows,lost_in_open_rows,lost_facing_down\n";
+           "lost_in_no_candidate_rows,lost_in_open_rows,lost_facing_down,lost_on_crease\n";
   }
   std::printf("closed loop on turntable-lift-tilt, placement %s, %zu rough rows, max_rounds %d, oracle 1 per %d fine vertices, %d threads\n",
               rig.models.settings.placement.automatic ? "auto" : "as_given", o.rough_vertices, o.max_rounds, o.oracle_decimation, o.threads);
@@ -380,13 +383,13 @@ int main(int argc, char** argv) {
                std::to_string(std::lround(g.value("realized_gain_mm2", 0.0)));
     std::printf("%-16s %6zu %6.3f %4zu/%4zu/%4zu %-8s %-18s %8.4f %8.4f %6zu %6.2f %8.4f %8.4f %8.4f %9.0f %9.0f %7.0f  to the job's m_v: oracle %zu views, "
                 "the job's own %zu; along normals: reach %.3f views %zu/%zu/%zu m_v_r %.4f ratio %.2f; gains %s, weak rounds %s, "
-                "needs attention %.0f mm2; lost by row state: measured %.4f attention %.4f no candidate %.4f open %.4f, facing down %.4f: %s\n",
+                "needs attention %.0f mm2; lost by row state: measured %.4f attention %.4f no candidate %.4f open %.4f, facing down %.4f, on a crease %.4f: %s\n",
                 obj.name.c_str(), j.fine_rows, oracle.reachable(), oracle.views_95, oracle.views_99, oracle.views_999,
                 dm::to_string(rec.state), per_round.c_str(), j.single, j.loop, j.views, ratio, verified,
                 verified / oracle.reachable(), j.analytic_mv, j.job_cell_time_s, oracle.cell_time_s, wall, j.oracle_views_to_loop,
                 j.own_views_to_loop, j.along_normal.reachable(), j.along_normal.views_95, j.along_normal.views_99,
                 j.along_normal.views_999, j.loop_normal, ratio_normal, gains.c_str(), weak.c_str(), attention,
-                j.lost_in_measured, j.lost_in_attention, j.lost_in_unmeasurable, j.lost_in_open, j.lost_facing_down, rec.cause.c_str());
+                j.lost_in_measured, j.lost_in_attention, j.lost_in_unmeasurable, j.lost_in_open, j.lost_facing_down, j.lost_on_crease, rec.cause.c_str());
     std::fflush(stdout);
     if (csv)
       csv << obj.name << ',' << j.fine_rows << ',' << oracle.reachable() << ',' << oracle.views_95 << ',' << oracle.views_99
@@ -396,7 +399,7 @@ int main(int argc, char** argv) {
           << j.job_cell_time_s << ',' << oracle.cell_time_s << ',' << j.oracle_views_to_loop << ',' << j.own_views_to_loop << ','
           << wall << ',' << j.along_normal.reachable() << ',' << j.along_normal.views_99 << ',' << j.loop_normal << ','
           << ratio_normal << ',' << j.lost_in_measured << ',' << j.lost_in_attention << ',' << j.lost_in_unmeasurable << ','
-          << j.lost_in_open << ',' << j.lost_facing_down << '\n';
+          << j.lost_in_open << ',' << j.lost_facing_down << ',' << j.lost_on_crease << '\n';
   }
   if (o.keep_dir.empty()) fs::remove_all(rig.work);
   return 0;

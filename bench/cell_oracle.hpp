@@ -2,7 +2,8 @@
 // The cell oracle of issue 15, shared by bench_cell (single-shot plans) and bench_loop (the daemon's closed
 // loop): dense candidates made from the fine mesh itself in the same configuration space as the plan, with
 // the same reachability, collisions and plate, covered greedily, and judged with the plan by the analytic
-// measurability test (frustum, bi-static visibility, eq. 3.4, eq. 3.8) on the fine mesh's vertices.
+// measurability test (frustum, bi-static visibility, eq. 3.4, eq. 3.8) on the fine mesh's vertices, a crease
+// vertex by its faces (judge_model).
 //
 // Oracle (shared/design/QUALITY-TARGETS.md): one view per K-th fine vertex along its normal at f_d·R_o, scan
 // length from the density spec; free space: 8 twists; on turntable_lift_tilt the one twist the cell reaches
@@ -37,9 +38,47 @@ namespace scancell::bench {
 
 namespace sp = scancell::planner;
 
-/// The oracle's candidates: one per `decimation`-th fine row, looking along the normal.
+/// The fine model the benches judge by (issue 15's analytic test): the fine mesh's vertices as rows, in its
+/// order, except that a vertex on a crease is judged by its faces. There (an adjacent triangle over 40° from
+/// the vertex normal: a box's edge, a hole's rim, a fillet's end) the vertex normal is a bisector no surface
+/// has: a view square to one face of a box's edge sees it 45° off and may fail eq. 3.4 or 3.8 for it although
+/// it measures the face, and a view at 45° passes it while it measures each face at 45°. So a crease vertex
+/// keeps its row with no area (the oracle still aims at it), and its area goes to one row per adjacent
+/// triangle: a point inside the triangle near the vertex (barycentric 0.6, 0.2, 0.2), the triangle's normal,
+/// a third of its area. These rows follow the vertex rows, in the crease vertices' order.
+inline sp::RoughModel judge_model(const sp::TriangleMesh& fine_mesh) {
+  sp::RoughModel fine = sp::make_rough_model(fine_mesh);
+  const std::size_t n = fine.size();
+  std::vector<std::uint8_t> on_crease(n, 0);
+  for (const auto r : sp::crease_rows(fine, 40.0 * std::numbers::pi / 180.0)) on_crease[r] = 1;
+  std::vector<std::vector<std::uint32_t>> faces_of(n);
+  for (std::uint32_t t = 0; t < fine.triangles.size(); ++t)
+    for (auto v : fine.triangles[t])
+      if (on_crease[v]) faces_of[v].push_back(t);
+  for (std::uint32_t r = 0; r < n; ++r) {
+    if (!on_crease[r] || faces_of[r].empty()) continue;
+    fine.area_mm2[r] = 0.0;
+    for (const auto t : faces_of[r]) {
+      const auto& tri = fine.triangles[t];
+      const Eigen::Vector3d fn = (fine.points[tri[1]] - fine.points[tri[0]]).cross(fine.points[tri[2]] - fine.points[tri[0]]);
+      if (fn.norm() == 0.0) continue;  // no area, no direction
+      Eigen::Vector3d p = 0.6 * fine.points[r];
+      for (auto v : tri)
+        if (v != r) p += 0.2 * fine.points[v];
+      fine.points.push_back(p);
+      fine.normals.push_back(fn.normalized());
+      fine.area_mm2.push_back(fn.norm() / 6.0);
+      if (!fine.segment.empty()) fine.segment.push_back(fine.segment[r]);
+      if (!fine.hypothetical.empty()) fine.hypothetical.push_back(fine.hypothetical[r]);
+    }
+  }
+  return fine;
+}
+
+/// The oracle's candidates: one per `decimation`-th of the first `aim_rows` fine rows, looking along the normal.
 inline std::vector<sp::Viewpoint> oracle_candidates(const sp::RoughModel& fine, const sp::SensorModel& sensor,
-                                             const sp::ModelSpec& spec, const sp::CellModel* cell, int decimation) {
+                                             const sp::ModelSpec& spec, const sp::CellModel* cell, int decimation,
+                                             std::size_t aim_rows) {
   const double standoff = 1.02 * sensor.optimal_standoff_mm;
   const double length = sp::design_scan_length_mm(sensor, spec, standoff, std::numbers::pi / 6);
   std::vector<sp::Viewpoint> out;
@@ -50,7 +89,7 @@ inline std::vector<sp::Viewpoint> oracle_candidates(const sp::RoughModel& fine, 
     const auto& tilt = cell->axes[cell->axis_index("tilt")];
     tilt_max = std::min(std::abs(tilt.min), std::abs(tilt.max));
   }
-  for (std::uint32_t i = 0; i < fine.size(); i += decimation) {
+  for (std::uint32_t i = 0; i < aim_rows; i += decimation) {
     Eigen::Vector3d b = -fine.normals[i];
     if (!one_twist) {
       for (int k = 0; k < 8; ++k) {
@@ -147,27 +186,29 @@ struct CellOracle {
   double reachable() const { return total_area_mm2 > 0 ? reach_area_mm2 / total_area_mm2 : 0.0; }
 };
 
-/// The cell's own views (the planner's cell-native generator) of every `decimation`-th fine vertex along its
-/// normal, at f_d·R_o; reachable and clear of `checker`'s object and fixtures.
+/// The cell's own views (the planner's cell-native generator) of every `decimation`-th of the first `aim_rows`
+/// fine rows along its normal, at f_d·R_o; reachable and clear of `checker`'s object and fixtures.
 inline std::vector<sp::Viewpoint> cell_space_candidates(const sp::RoughModel& fine, const sp::SensorModel& sensor,
                                                         const sp::ModelSpec& spec, const sp::CellModel& cell,
                                                         const sp::CollisionChecker& checker, const sp::ViewpointSettings& vs,
-                                                        int decimation) {
+                                                        int decimation, std::size_t aim_rows) {
   std::vector<sp::AimPoint> aims;
-  for (std::uint32_t i = 0; i < fine.size(); i += decimation)
+  for (std::uint32_t i = 0; i < aim_rows; i += decimation)
     if (fine.normals[i].squaredNorm() > 0.5)  // a knife edge's zero normal says nothing about where to look from
       aims.push_back({fine.points[i], fine.normals[i], 1.02 * sensor.optimal_standoff_mm, static_cast<std::int32_t>(i)});
   return sp::cell_viewpoints_at(aims, sensor, spec, vs, cell, checker);
 }
 
-/// The oracle for the fine model `fine` (rows of `fine_mesh`) in `scene` (the fine mesh and, on a cell, the
+/// The oracle for the fine model `fine` (judge_model of `fine_mesh`) in `scene` (the fine mesh and, on a cell, the
 /// plate), on the placed `cell` or in free space; with `cell_space` on a cell-native cell, in the cell's own
 /// space (above), and then `along_normal` (when given) is the oracle of the views along the normals alone.
 inline CellOracle cell_oracle(const sp::TriangleMesh& fine_mesh, const sp::RoughModel& fine, const sp::OcclusionScene& scene,
                               const sp::SensorModel& sensor, const sp::ModelSpec& spec, const sp::CellModel* cell,
                               int decimation, const sp::ViewpointSettings* cell_space = nullptr,
                               CellOracle* along_normal = nullptr) {
-  std::vector<sp::Viewpoint> cands = oracle_candidates(fine, sensor, spec, cell, decimation);
+  // The aims: the fine vertices (judge_model's crease rows after them are judged, not aimed at).
+  const std::size_t aim_rows = std::min(fine.size(), fine_mesh.vertices.size());
+  std::vector<sp::Viewpoint> cands = oracle_candidates(fine, sensor, spec, cell, decimation, aim_rows);
   const std::size_t n_base = cands.size();
   std::vector<std::uint8_t> usable(n_base, 1), axis_ok(n_base, 1);
   std::size_t n_normal = n_base;  // the views along the normals, stepped back ones included
@@ -202,7 +243,7 @@ inline CellOracle cell_oracle(const sp::TriangleMesh& fine_mesh, const sp::Rough
       std::set<std::array<long long, 12>> seen;
       for (std::size_t i = 0; i < cands.size(); ++i)
         if (usable[i]) seen.insert(cands[i].pose_key());
-      for (const auto& v : cell_space_candidates(fine, sensor, spec, *cell, checker, *cell_space, decimation))
+      for (const auto& v : cell_space_candidates(fine, sensor, spec, *cell, checker, *cell_space, decimation, aim_rows))
         if (seen.insert(v.pose_key()).second) cands.push_back(v);
     }
     usable.resize(cands.size(), 1);
@@ -217,7 +258,7 @@ inline CellOracle cell_oracle(const sp::TriangleMesh& fine_mesh, const sp::Rough
   };
   std::vector<std::uint8_t> reach_noplate(fine.size(), 0), reach_plate(fine.size(), 0), reach_axes(fine.size(), 0);
   if (cell) {
-    const sp::OcclusionScene bare(fine.mesh());
+    const sp::OcclusionScene bare(fine_mesh);
     std::vector<sp::Viewpoint> base(cands.begin(), cands.begin() + static_cast<std::ptrdiff_t>(n_base));
     const auto nm = sp::build_measurability(fine, bare, sensor, spec, base);
     for (const auto& c : nm.columns) c.for_each([&](std::uint32_t r) { reach_noplate[r] = 1; });
