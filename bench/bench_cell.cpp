@@ -14,7 +14,8 @@
 // axes must reach it and the scanner body clear the object and the plate, stepped back when not. On a cell
 // the oracle is in the cell's own space (cell_oracle.hpp): the same aims also get the cell's other views of
 // the point that the plan's candidates are made of (bisector, oblique); the oracle along the normals alone
-// is reported beside it ("along normals"). Greedy cover.
+// is reported beside it ("along normals"). Greedy cover. On a cell the plan is covered as the daemon's round 0
+// is, without the between-view registration constraint.
 // Columns: views to 95/99/99.9 % of the oracle-reachable area; the plan's views, its m_v of that area, its
 // views over the oracle's to 99 %; cell time (moves + sweeps, travel-ordered) for both.
 #include <chrono>
@@ -127,8 +128,12 @@ Row judge(const sp::TriangleMesh& fine_mesh, const std::optional<sp::CellModel>&
   Row row;
   sp::RoughModelOptions ro;
   ro.target_vertices = o.rough_vertices;
+  // On a cell the plan is the daemon's round 0, which covers without the between-view constraint (its views
+  // register to the object's model; JobRunner::read_request).
+  sp::PlannerSettings as_planned = settings;
+  if (cell && as_planned.cover.mode == sp::CoverMode::constrained) as_planned.cover.mode = sp::CoverMode::greedy;
   const auto t0 = Clock::now();
-  const sp::ViewPlan plan = sp::plan_views(fine_mesh, sensor, spec, settings, ro, n_threads, cell ? &*cell : nullptr);
+  const sp::ViewPlan plan = sp::plan_views(fine_mesh, sensor, spec, as_planned, ro, n_threads, cell ? &*cell : nullptr);
   row.plan_s = scancell::seconds_since(t0);
   row.stages = plan.times;
   // The fine mesh's rows, in the plan's object frame, with the plate.

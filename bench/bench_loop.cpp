@@ -286,8 +286,10 @@ Judged judge(Rig& rig, const Options& o, std::int64_t job, const sp::TriangleMes
   const dm::CellModels& m = rig.models;
   sp::RoughModelOptions ro;
   ro.target_vertices = o.rough_vertices;
-  sp::ViewPlan plan = m.settings.placement.automatic ? sp::plan_with_placement(fine_mesh, m.sensor, m.spec, m.settings, ro, o.threads, m.cell)
-                                                     : sp::plan_views(fine_mesh, m.sensor, m.spec, m.settings, ro, o.threads, &m.cell);
+  sp::PlannerSettings as_job = m.settings;  // a job covers without the between-view constraint (JobRunner::read_request)
+  if (as_job.cover.mode == sp::CoverMode::constrained) as_job.cover.mode = sp::CoverMode::greedy;
+  sp::ViewPlan plan = as_job.placement.automatic ? sp::plan_with_placement(fine_mesh, m.sensor, m.spec, as_job, ro, o.threads, m.cell)
+                                                 : sp::plan_views(fine_mesh, m.sensor, m.spec, as_job, ro, o.threads, &m.cell);
   sp::CellModel placed = *plan.cell;
   for (std::size_t k = 0; k < placed.axes.size(); ++k) {
     placed.axes[k].max_speed = rig.real_cell.axes[k].max_speed;

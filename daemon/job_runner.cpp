@@ -118,6 +118,11 @@ bool JobRunner::read_request(Job& j, const JobRecord& rec) {
     if (!j.request.placement.empty()) j.settings.placement.automatic = j.request.placement == "auto";
     if (j.request.bbox_mm) j.settings.placement.automatic = false;  // it already stands on the table
     j.rough_options.seed = j.settings.seed;
+    // Every round and setup of a job is covered without the between-view registration constraint (thesis
+    // 4.4.3): each view registers to the object's model (ModelCloud in restore()), not to the views before
+    // it, so the constraint buys nothing here; and with it a coarse, boxy rough model can leave a face
+    // without a view once crease rows are judged by their faces. `exact` stays exact.
+    if (j.settings.cover.mode == sp::CoverMode::constrained) j.settings.cover.mode = sp::CoverMode::greedy;
     if (!j.request.bbox_mm) j.object = load_object(j.request.mesh, j.request.fit_mm);
     else if (j.request.truth.empty()) throw scancell::DataError("a bounding-box job needs 'truth' in simulation: what stands on the table");
   } catch (const std::exception& e) {
@@ -380,10 +385,7 @@ std::optional<JobState> JobRunner::replan(Job& j, const std::vector<std::uint8_t
                                           const std::vector<std::uint8_t>& retired, std::size_t n_retired, std::size_t open,
                                           const std::string& summary, const std::atomic<int>& stop) {
   transition(j, JobState::replanning, std::to_string(open) + " rows left");
-  sp::PlannerSettings replan = j.settings;
-  // Later rounds go after the leftovers only; their views register to the model through the rows they
-  // share with it, not through each other, so the between-view registration constraint is dropped.
-  if (replan.cover.mode == sp::CoverMode::constrained) replan.cover.mode = sp::CoverMode::greedy;
+  sp::PlannerSettings replan = j.settings;  // without the between-view constraint (read_request)
   // The single shot leaves slivers under cover.min_view_gain_mm2 to the loop; a replan takes every view
   // that still gains jobs.min_gain_per_view_mm2 (weighted as below), and no view for less.
   replan.cover.min_view_gain = settings_.min_gain_per_view_mm2;

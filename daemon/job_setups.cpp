@@ -279,8 +279,7 @@ std::optional<JobState> JobRunner::plan_setup(Job& j, int setup, const json& exp
                                               const json& alignment, const std::atomic<int>& stop) {
   const std::string name = "setup " + std::to_string(setup);
   const std::vector<std::uint8_t> measured = j.coverage->measured_rows();
-  sp::PlannerSettings settings = j.settings;
-  if (settings.cover.mode == sp::CoverMode::constrained) settings.cover.mode = sp::CoverMode::greedy;  // views register to the model
+  const sp::PlannerSettings& settings = j.settings;  // without the between-view constraint (read_request)
   const sp::CellModel placed = resting_at(models_.cell, j.object, estimated);
   const sp::ViewPlan p = plan_or_stop([&] {
     return sp::plan_views(j.object, models_.sensor, j.spec, settings, j.rough_options, settings_.planner_threads, &placed, &measured,
