@@ -131,7 +131,7 @@ Row judge(const sp::TriangleMesh& fine_mesh, const std::optional<sp::CellModel>&
   // On a cell the plan is the daemon's round 0, which covers without the between-view constraint (its views
   // register to the object's model; JobRunner::read_request).
   sp::PlannerSettings as_planned = settings;
-  if (cell && as_planned.cover.mode == sp::CoverMode::constrained) as_planned.cover.mode = sp::CoverMode::greedy;
+  if (cell) as_planned.cover = sp::registered_to_model(settings.cover);
   const auto t0 = Clock::now();
   const sp::ViewPlan plan = sp::plan_views(fine_mesh, sensor, spec, as_planned, ro, n_threads, cell ? &*cell : nullptr);
   row.plan_s = scancell::seconds_since(t0);

@@ -287,7 +287,7 @@ Judged judge(Rig& rig, const Options& o, std::int64_t job, const sp::TriangleMes
   sp::RoughModelOptions ro;
   ro.target_vertices = o.rough_vertices;
   sp::PlannerSettings as_job = m.settings;  // a job covers without the between-view constraint (JobRunner::read_request)
-  if (as_job.cover.mode == sp::CoverMode::constrained) as_job.cover.mode = sp::CoverMode::greedy;
+  as_job.cover = sp::registered_to_model(m.settings.cover);
   sp::ViewPlan plan = as_job.placement.automatic ? sp::plan_with_placement(fine_mesh, m.sensor, m.spec, as_job, ro, o.threads, m.cell)
                                                  : sp::plan_views(fine_mesh, m.sensor, m.spec, as_job, ro, o.threads, &m.cell);
   sp::CellModel placed = *plan.cell;

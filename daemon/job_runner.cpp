@@ -121,8 +121,8 @@ bool JobRunner::read_request(Job& j, const JobRecord& rec) {
     // Every round and setup of a job is covered without the between-view registration constraint (thesis
     // 4.4.3): each view registers to the object's model (ModelCloud in restore()), not to the views before
     // it, so the constraint buys nothing here; and with it a coarse, boxy rough model can leave a face
-    // without a view once crease rows are judged by their faces. `exact` stays exact.
-    if (j.settings.cover.mode == sp::CoverMode::constrained) j.settings.cover.mode = sp::CoverMode::greedy;
+    // without a view once crease rows are judged by their faces.
+    j.settings.cover = sp::registered_to_model(j.settings.cover);
     if (!j.request.bbox_mm) j.object = load_object(j.request.mesh, j.request.fit_mm);
     else if (j.request.truth.empty()) throw scancell::DataError("a bounding-box job needs 'truth' in simulation: what stands on the table");
   } catch (const std::exception& e) {

@@ -49,6 +49,14 @@ inline bool registration_applies(const CoverSettings& s) {
   return s.mode == CoverMode::constrained || (s.mode == CoverMode::exact && s.registration_threshold > 0.0);
 }
 
+/// The cover for views that each register to the object's model, not to the views before them (a cell job's
+/// rounds and setups: the daemon registers every scan to the model): constrained greedy becomes plain greedy,
+/// as thesis 4.4.3's between-view constraint buys no registration there. `exact` is left as configured.
+inline CoverSettings registered_to_model(CoverSettings s) {
+  if (s.mode == CoverMode::constrained) s.mode = CoverMode::greedy;
+  return s;
+}
+
 struct RegistrationEdge {
   std::uint32_t a, b;  // positions in the plan (selection order)
   double sigma;        // σ_ab, eq. 4.1 with row weights (see greedy_cover)

@@ -91,5 +91,20 @@ TEST(Constrained, StopsWhenTheRestCannotRegister) {
   EXPECT_EQ(c.stop_reason, "remaining gain needs views that cannot register (t_r)");
 }
 
+TEST(Constrained, ViewsRegisteredToTheModelCoverTheRestWithoutIt) {
+  // The instance above, covered as a cell job covers it (registered_to_model): both halves, 2 views, where
+  // the constraint stopped at 1. Exact covers keep their mode (and with t_r > 0 their registration).
+  const auto m = matrix(6, {{0, 1, 2}, {3, 4, 5}});
+  CoverSettings con;
+  con.registration_threshold = 0.1;
+  const CoverSettings job = registered_to_model(con);
+  EXPECT_FALSE(registration_applies(job));
+  EXPECT_EQ(greedy_cover(m, ones(6), job).views, (std::vector<std::uint32_t>{0, 1}));
+  CoverSettings exact = con;
+  exact.mode = CoverMode::exact;
+  EXPECT_EQ(registered_to_model(exact).mode, CoverMode::exact);
+  EXPECT_TRUE(registration_applies(registered_to_model(exact)));
+}
+
 }  // namespace
 }  // namespace scancell::planner

@@ -186,7 +186,7 @@ TEST(Placement, TheShippedSettingsAsAJobPlansThemStandTheBoxOnEndToo) {
   // to table +y without a view that registers, and placement laid the box on a side (docs/quality.md).
   sp::PlannerSettings settings = sp::load_planner_settings(sp::testing::source_path("config/planner/default.yaml"));
   ASSERT_GT(settings.crease_footprint_samples, 0);
-  if (settings.cover.mode == sp::CoverMode::constrained) settings.cover.mode = sp::CoverMode::greedy;
+  settings.cover = sp::registered_to_model(settings.cover);
   expect_the_box_stood_on_end(settings);
 }
 
