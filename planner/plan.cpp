@@ -287,23 +287,7 @@ MeasurabilityMatrix make_matrix(const Stage& s, const OcclusionScene& scene, con
   PlainElements plain{plain_cm, {}};
   auto matrix = build_measurability(p.rough, scene, s.sensor, s.spec, candidates, s.settings.matrix, &p.matrix_stats,
                                     s.cancel, p.free_space_margin_applied ? &plain : nullptr);
-  if (p.free_space_margin_applied) {
-    std::vector<std::uint8_t> is_lost(p.rough.size(), 0), gained(p.rough.size(), 0);
-    const std::vector<std::uint32_t> lost = matrix.unmeasurable_rows();
-    for (auto r : lost) is_lost[r] = 1;
-    for (std::size_t j = 0; j < matrix.columns.size() && !lost.empty(); ++j) {
-      std::vector<std::uint32_t> add;
-      plain.matrix.columns[j].for_each([&](std::uint32_t r) {
-        if (is_lost[r]) add.push_back(r), gained[r] = 1;
-      });
-      if (add.empty()) continue;  // most columns: left as they are, not copied
-      std::vector<std::uint32_t> rows = matrix.columns[j].rows();
-      rows.insert(rows.end(), add.begin(), add.end());
-      std::sort(rows.begin(), rows.end());
-      matrix.columns[j] = MeasurabilityColumn(std::move(rows), matrix.n_rows);
-    }
-    p.generation.rows_without_margin = static_cast<std::size_t>(std::count(gained.begin(), gained.end(), 1));
-  }
+  if (p.free_space_margin_applied) p.generation.rows_without_margin = keep_plain_elements_of_lost_rows(matrix, plain);
   strip_measured(matrix, s.measured_rows);
   // Rows nothing measures get more views: on a cell-native cell first the cell's views of themselves, then
   // (any cell, or free space) views along their open directions (deep holes, undercuts).
@@ -513,17 +497,18 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     const std::vector<double> row_weight = row_weights(p.rough, measured_rows, row_weight_scale);
     // The rows predicted by footprint samples: a replan's open rows, by what they lack (the caller's measured
     // coverage); or, in a single shot on a cell, every row by its whole footprint when
-    // matrix.cell_footprint_samples says so, else the rows on a crease (matrix.crease_footprint_samples). Only a
-    // replan's also get candidates aimed at them (the stage's `footprints`): for every row of a single shot
-    // those are five more per row, and 13-14 s more of plan for 5k rows (docs/quality.md).
+    // matrix.cell_footprint_samples says so; else, on a cell and in free space, the rows on a crease
+    // (matrix.crease_footprint_samples). Only a replan's also get candidates aimed at them (the stage's
+    // `footprints`): for every row of a single shot those are five more per row, and 13-14 s more of plan for
+    // 5k rows (docs/quality.md).
     RowFootprints whole;
     const RowFootprints* predicted_by = footprints;
-    if (!footprints && p.cell && !measured_rows) {
-      if (settings.cell_footprint_samples > 0) {
+    if (!footprints && !measured_rows) {
+      if (p.cell && settings.cell_footprint_samples > 0) {
         whole = whole_row_footprints(p.rough, spec, static_cast<std::size_t>(settings.cell_footprint_samples));
       } else if (settings.crease_footprint_samples > 0) {
-        // Free space keeps the vertex test: there the margin does the rows' work, and crease samples cost the
-        // fandisk and the box 0.008-0.019 of their m_v (docs/quality.md).
+        // In free space too (session 31): the fandisk 32 -> 26 views, couplingdown's m_v 0.984 -> 0.994
+        // (docs/quality.md, "Crease rows in free space").
         whole = MeasuredCoverage(p.rough, spec)
                     .open_footprints(crease_rows(p.rough, settings.crease_angle_rad), static_cast<std::size_t>(settings.crease_footprint_samples));
       }
@@ -556,7 +541,8 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     std::optional<SampleCover> samples;
     if (predicted_by) {
       samples = cover_by_samples(matrix, row_weight, *predicted_by, scene, sensor, spec, candidates, settings.matrix,
-                                 p.rough.mean_edge_mm, cancel);
+                                 p.rough.mean_edge_mm, cancel,
+                                 p.free_space_margin_applied ? &settings_in.matrix.countermeasures : nullptr);
     }
     p.candidates = candidates.size();
     p.matrix_density = matrix.density();

@@ -44,7 +44,7 @@ std::vector<AimPoint> footprint_aims(const RowFootprints& f, double standoff_mm)
 SampleCover cover_by_samples(const MeasurabilityMatrix& matrix, const std::vector<double>& row_weight, const RowFootprints& f,
                              const OcclusionScene& scene, const SensorModel& sensor, const ModelSpec& spec,
                              const std::vector<Viewpoint>& candidates, const MatrixSettings& settings, double mean_edge_mm,
-                             const std::atomic<int>* cancel) {
+                             const std::atomic<int>* cancel, const Countermeasures* plain) {
   f.validate(matrix.n_rows);
   if (candidates.size() != matrix.n_cols())
     throw DataError("row footprints: " + std::to_string(candidates.size()) + " candidates for a matrix of " +
@@ -73,9 +73,15 @@ SampleCover cover_by_samples(const MeasurabilityMatrix& matrix, const std::vecto
   samples.normals = f.normals;
   samples.area_mm2.assign(f.points.size(), 0.0);
   samples.mean_edge_mm = mean_edge_mm;  // the same ray offset as the rows'
-  const MeasurabilityMatrix by_sample =
-      f.points.empty() ? MeasurabilityMatrix{0, std::vector<MeasurabilityColumn>(candidates.size())}
-                       : build_measurability(samples, scene, sensor, spec, candidates, settings, nullptr, cancel);
+  // With a margin (`plain`: the test without it), a sample keeps what the plain test gives it when the margin
+  // leaves it no view, as the rows do (keep_plain_elements_of_lost_rows).
+  MeasurabilityMatrix by_sample{0, std::vector<MeasurabilityColumn>(candidates.size())};
+  if (!f.points.empty()) {
+    PlainElements plain_elements{plain ? *plain : Countermeasures{}, {}};
+    by_sample = build_measurability(samples, scene, sensor, spec, candidates, settings, nullptr, cancel,
+                                    plain ? &plain_elements : nullptr);
+    if (plain) keep_plain_elements_of_lost_rows(by_sample, plain_elements);
+  }
   c.matrix.n_rows = matrix.n_rows + n_samples;
   c.matrix.columns.resize(matrix.n_cols());
   for (std::size_t j = 0; j < matrix.n_cols(); ++j) {

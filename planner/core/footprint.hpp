@@ -33,7 +33,8 @@ struct RowFootprints {
 /// appended after the rough model's (sample s is row n_rows + s), each weighing the row's weight over its
 /// sample count. A view gains by the share of a row it would fill, so that views which finish a row together
 /// are found as well as one that finishes it alone. The samples' elements are the matrix builder's element
-/// test with the same settings.
+/// test with the same settings; with `plain` (the test without the free-space margin), a sample the margin
+/// leaves without a view keeps the plain test's elements, as a row does.
 struct SampleCover {
   MeasurabilityMatrix matrix;  // the rough model's rows (footprint rows left empty), then the samples
   std::vector<double> weight;  // per row of `matrix`
@@ -49,7 +50,7 @@ std::vector<AimPoint> footprint_aims(const RowFootprints& f, double standoff_mm)
 SampleCover cover_by_samples(const MeasurabilityMatrix& matrix, const std::vector<double>& row_weight, const RowFootprints& footprints,
                              const OcclusionScene& scene, const SensorModel& sensor, const ModelSpec& spec,
                              const std::vector<Viewpoint>& candidates, const MatrixSettings& settings, double mean_edge_mm,
-                             const std::atomic<int>* cancel = nullptr);
+                             const std::atomic<int>* cancel = nullptr, const Countermeasures* plain = nullptr);
 
 /// The footprint rows `views` (columns of `c.matrix`) finish together: at least needed[k] of a row's samples
 /// measured by one or another of them. One flag per rough-model row (rows without a footprint: 0).

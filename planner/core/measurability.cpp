@@ -304,6 +304,28 @@ class ColumnWorker {
 
 }  // namespace
 
+std::size_t keep_plain_elements_of_lost_rows(MeasurabilityMatrix& m, const PlainElements& plain) {
+  if (plain.matrix.n_cols() != m.n_cols())
+    throw DataError("plain elements: " + std::to_string(plain.matrix.n_cols()) + " columns for a matrix of " +
+                    std::to_string(m.n_cols()));
+  const std::vector<std::uint32_t> lost = m.unmeasurable_rows();
+  if (lost.empty()) return 0;
+  std::vector<std::uint8_t> is_lost(m.n_rows, 0), gained(m.n_rows, 0);
+  for (auto r : lost) is_lost[r] = 1;
+  for (std::size_t j = 0; j < m.columns.size(); ++j) {
+    std::vector<std::uint32_t> add;
+    plain.matrix.columns[j].for_each([&](std::uint32_t r) {
+      if (is_lost[r]) add.push_back(r), gained[r] = 1;
+    });
+    if (add.empty()) continue;  // most columns: left as they are, not copied
+    std::vector<std::uint32_t> rows = m.columns[j].rows();
+    rows.insert(rows.end(), add.begin(), add.end());
+    std::sort(rows.begin(), rows.end());
+    m.columns[j] = MeasurabilityColumn(std::move(rows), m.n_rows);
+  }
+  return static_cast<std::size_t>(std::count(gained.begin(), gained.end(), 1));
+}
+
 MeasurabilityMatrix build_measurability(const RoughModel& rough, const OcclusionScene& scene, const SensorModel& sensor,
                                         const ModelSpec& spec, const std::vector<Viewpoint>& candidates,
                                         const MatrixSettings& settings, MatrixStats* stats, const std::atomic<int>* cancel,

@@ -109,6 +109,11 @@ MeasurabilityMatrix build_measurability(const RoughModel& rough, const Occlusion
                                         const MatrixSettings& settings = {}, MatrixStats* stats = nullptr,
                                         const std::atomic<int>* cancel = nullptr, PlainElements* plain = nullptr);
 
+/// The free-space margin chooses among the views that can measure a row; it does not give up a row only views
+/// at the edge of the spec reach measure (a bore's wall, seen only at grazing incidence): the rows `m` measures
+/// in no column get the elements `plain` (built in the same pass) gives them. Returns how many rows did.
+std::size_t keep_plain_elements_of_lost_rows(MeasurabilityMatrix& m, const PlainElements& plain);
+
 /// The same element test with no culling at all: every pair is transformed and both rays cast whatever the
 /// analytic tests say. The thesis' O(s²v) reference; for benchmarks and cross-checks only.
 MeasurabilityMatrix build_measurability_naive(const RoughModel& rough, const OcclusionScene& scene,
