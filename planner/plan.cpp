@@ -497,23 +497,26 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     const std::vector<double> row_weight = row_weights(p.rough, measured_rows, row_weight_scale);
     // The rows predicted by footprint samples: a replan's open rows, by what they lack (the caller's measured
     // coverage); or, in a single shot on a cell, every row by its whole footprint when
-    // matrix.cell_footprint_samples says so; else, on a cell and in free space, the rows on a crease
-    // (matrix.crease_footprint_samples). Only a replan's also get candidates aimed at them (the stage's
-    // `footprints`): for every row of a single shot those are five more per row, and 13-14 s more of plan for
-    // 5k rows (docs/quality.md).
+    // matrix.cell_footprint_samples says so; else the rows on a crease (matrix.crease_footprint_samples) when
+    // the views need not register to each other (a cell job's cover, or --cover greedy). Only a replan's
+    // also get candidates aimed at them (the stage's `footprints`): for every row of a single shot those are
+    // five more per row, and 13-14 s more of plan for 5k rows (docs/quality.md).
     RowFootprints whole;
     const RowFootprints* predicted_by = footprints;
     if (!footprints && !measured_rows) {
       if (p.cell && settings.cell_footprint_samples > 0) {
         whole = whole_row_footprints(p.rough, spec, static_cast<std::size_t>(settings.cell_footprint_samples));
-      } else if (settings.crease_footprint_samples > 0) {
-        // In free space too (session 31): the fandisk 32 -> 26 views, couplingdown's m_v 0.984 -> 0.994
-        // (docs/quality.md, "Crease rows in free space").
+      } else if (settings.crease_footprint_samples > 0 && !registration_applies(settings.cover)) {
+        // Not under the between-view constraint (eq. 4.2): split between its faces, a box's edge row no longer
+        // lets views of two faces at 90° overlap, and nothing else does at the spec, so a constrained cover
+        // stops with faces unplanned (a 120 x 80 x 40 box at 600 rows: 0.26 in free space, 0.60 on the
+        // turntable; docs/quality.md "Crease rows in free space"). Free space and on a cell alike.
         whole = MeasuredCoverage(p.rough, spec)
                     .open_footprints(crease_rows(p.rough, settings.crease_angle_rad), static_cast<std::size_t>(settings.crease_footprint_samples));
       }
       if (!whole.rows.empty()) predicted_by = &whole;
     }
+    p.rows_by_footprint_samples = predicted_by ? predicted_by->size() : 0;
     if (footprints) {
       footprints->validate(static_cast<std::uint32_t>(p.rough.size()));
       for (auto r : footprints->rows)
@@ -699,6 +702,7 @@ json summary_json(const ViewPlan& p) {
       {"viewpoint_positions", p.generation.positions},
       {"viewpoint_positions_by_decimation", p.generation.positions_by_decimation},
       {"segments", p.segments},
+      {"rows_by_footprint_samples", p.rows_by_footprint_samples},
       {"single_best_view_candidates", p.generation.single_best_views},
       {"rows_unmeasurable_by_first_candidates", p.generation.rows_unmeasurable_before},
       {"rows_measured_without_the_free_space_margin", p.generation.rows_without_margin},
@@ -868,6 +872,13 @@ std::string plan_summary(const ViewPlan& p) {
                 p.cover.registration_components <= 1 ? "connected" : "NOT connected", p.cover.registration_components,
                 p.settings.cover.registration_threshold);
   os << buf << p.cover.stop_reason << "\n";
+  if (p.rows_by_footprint_samples > 0) {
+    os << "rows predicted by footprint samples: " << p.rows_by_footprint_samples << "\n";
+  } else if (p.settings.crease_footprint_samples > 0 && registration_applies(p.settings.cover)) {
+    // Not silent: the settings ask for crease samples and this cover cannot use them (plan_views).
+    os << "crease rows: by the vertex under the registration constraint (matrix.crease_footprint_samples applies to "
+          "covers without it: --cover greedy, a cell job)\n";
+  }
   std::snprintf(buf, sizeof buf,
                 "times (s): rough %.3f  scene %.3f  viewpoints %.3f  matrix %.3f  cover %.3f  total %.3f  (%d threads)\n",
                 p.times.rough_model_s, p.times.scene_s, p.times.viewpoints_s, p.times.matrix_s, p.times.cover_s,
