@@ -296,7 +296,7 @@ bool ModbusDriveSim::handle(void* ctxv, const std::uint8_t* req, int len) {
   if (cmd == mm::kNone) return true;
   regs[mm::kCommand] = mm::kNone;
   const std::int32_t target = mm::get_i32(regs, mm::kTargetHi);
-  log_.push_back({cmd, target});
+  log_.push_back({cmd, target, std::chrono::steady_clock::now()});
   return execute(cmd, target, f);
 }
 

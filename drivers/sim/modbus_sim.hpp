@@ -4,6 +4,7 @@
 // pseudo-terminal (RTU over a real serial line discipline). Every command it receives is logged, and a target
 // outside its travel is recorded as a violation (the tests assert there are none).
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <mutex>
 #include <string>
@@ -36,6 +37,7 @@ struct DriveParams {
 struct LoggedCommand {
   std::uint16_t command;
   std::int32_t target;
+  std::chrono::steady_clock::time_point at;  // when the drive took it (latency checks, not the test's polling)
 };
 
 class ModbusDriveSim {
