@@ -869,8 +869,12 @@ std::string plan_summary(const ViewPlan& p) {
                 "views: %zu  estimated measurability: %.4f (area)  reachable: %.4f  unmeasurable rows: %zu  "
                 "registration: %s (%zu components, t_r %.2f)  stopped: ",
                 p.views.size(), est, p.cover.measurable_fraction, p.cover.unmeasurable_rows.size(),
-                p.cover.registration_components <= 1 ? "connected" : "NOT connected", p.cover.registration_components,
-                p.settings.cover.registration_threshold);
+                // On a cell without the between-view constraint every view registers to the model (a job's
+                // cover): the components say how the views overlap, not whether they register.
+                p.cover.registration_components <= 1   ? "connected"
+                : p.cell && !registration_applies(p.settings.cover) ? "each view to the model"
+                                                                    : "NOT connected",
+                p.cover.registration_components, p.settings.cover.registration_threshold);
   os << buf << p.cover.stop_reason << "\n";
   if (p.rows_by_footprint_samples > 0) {
     os << "rows predicted by footprint samples: " << p.rows_by_footprint_samples << "\n";

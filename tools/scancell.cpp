@@ -45,7 +45,8 @@ const char* kPlanUsage =
     "  --segments FILE           surface patch label per mesh vertex (integers, -1 none), in vertex order\n"
     "                            after welding; adds single-best-view candidates per patch (thesis 6.3.4)\n"
     "  --cover greedy|constrained|exact   override the settings' cover mode (exact: CBC integer program,\n"
-    "                            registration enforced when t_r > 0, greedy warm start, cover.exact_time_limit_s)\n"
+    "                            registration enforced when t_r > 0, greedy warm start, cover.exact_time_limit_s);\n"
+    "                            with --cell and without --cover, constrained reads as greedy, as in a job\n"
     "  --threads N               worker threads (default all cores; the plan does not depend on it)\n"
     "  --cell CELL.yaml          plan for this cell (config/cells): reachable, collision-free views with their\n"
     "                            axis targets, in the order of least travel\n"
@@ -159,6 +160,13 @@ int cmd_plan(int argc, char** argv) {
     else if (m == "constrained") settings.cover.mode = sp::CoverMode::constrained;
     else if (m == "exact") settings.cover.mode = sp::CoverMode::exact;
     else throw UsageError("--cover: '" + m + "' is not greedy, constrained or exact");
+  } else if (o.count("--cell") && settings.cover.mode != sp::registered_to_model(settings.cover).mode) {
+    // On a cell the plan previews a job, whose every view registers to the object's model through the axes:
+    // it covers as the daemon does (docs/daemon.md). --cover constrained keeps thesis 4.4.3's constraint.
+    settings.cover = sp::registered_to_model(settings.cover);
+    if (!o.count("--quiet"))
+      std::cerr << "scancell: on a cell the cover is greedy, as a job's (every view registers to the model); "
+                   "--cover constrained keeps the between-view registration constraint\n";
   }
   if (o.count("--placement")) {
     const std::string& m = o.at("--placement");

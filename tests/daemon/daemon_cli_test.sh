@@ -140,6 +140,9 @@ ctl status | grep -q "turntable_axis-" || fail "status does not list the calibra
 out=$("$BUILD/tools/scancell" plan --mesh "$SRC/tests/data/cube50.off" --sensor "$SRC/config/sensors/line-scan-thesis.yaml" \
   --spec "$SRC/config/spec/thesis.yaml" --cell "$SRC/config/cells/turntable-lift-tilt.yaml" --calibration "$calfile" \
   --out "$W/plan.json" 2>&1) || fail "scancell plan --calibration: $out"
+# On a cell the plan covers as a job does (the settings' constrained reads as greedy) and says so.
+grep -q '"mode": "greedy"' "$W/plan.json" && echo "$out" | grep -q "on a cell the cover is greedy" \
+  || fail "scancell plan --cell: not covered as a job covers: $out"
 out=$("$BUILD/tools/scancell" plan --mesh "$SRC/tests/data/cube50.off" --sensor "$SRC/config/sensors/line-scan-thesis.yaml" \
   --spec "$SRC/config/spec/thesis.yaml" --calibration "$calfile" --out "$W/plan.json" 2>&1); rc=$?
 [ $rc = 2 ] && echo "$out" | grep -q "needs --cell" || fail "axis calibration without a cell: exit $rc: $out"
