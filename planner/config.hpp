@@ -49,23 +49,30 @@ struct PlannerSettings {
   /// cell oracle, aiming at fine vertices, knows (docs/quality.md: on the turntable cell knot1's single shot
   /// measures 0.9777 of the reach in 149 views by the vertex, 0.9880 in 175 by 8 samples; plans 3-4× slower).
   int cell_footprint_samples = 0;
-  /// matrix.crease_footprint_samples / crease_angle_rad: when the cover does not apply the registration
-  /// constraint (a cell job's, or --cover greedy; in free space and, when cell_footprint_samples is 0, on a
-  /// cell), a plan that is not a replan predicts the rows on a crease (crease_rows: a triangle more than crease_angle_rad
-  /// from the row's normal) by up to this many footprint samples, each with its own triangle's normal; 0: by
-  /// the vertex. A crease row's bisector normal (a box's edge, a hole's rim, a pocket's floor by its wall)
-  /// faces no surface that is there: views that measure both faces fail it, and the cover spent views on
-  /// those rows alone (docs/quality.md: the box with a blind hole 39 views, 1.44× the cell oracle; by 4
-  /// samples 30). 0 here, 4 in config/planner/default.yaml. Not under the registration constraint (eq. 4.2):
-  /// split into samples, a box's edge rows no longer let views of two faces overlap, and the constraint
-  /// leaves faces unplanned (docs/quality.md, sessions 26 and 31); a cell job covers without it
-  /// (registered_to_model).
+  /// matrix.crease_footprint_samples / crease_angle_rad: a plan that is not a replan predicts the rows on a
+  /// crease (crease_rows: a triangle more than crease_angle_rad from the row's normal) by up to this many
+  /// footprint samples, each with its own triangle's normal (in free space and, when cell_footprint_samples
+  /// is 0, on a cell); 0: by the vertex. A crease row's bisector normal (a box's edge, a hole's rim, a
+  /// pocket's floor by its wall) faces no surface that is there: views that measure both faces fail it, and
+  /// the cover spent views on those rows alone (docs/quality.md: the box with a blind hole 39 views, 1.44×
+  /// the cell oracle; by 4 samples 30). 0 here, 4 in config/planner/default.yaml. Under the registration
+  /// constraint (eq. 4.2) two views overlap on such a row when each measures some of its samples
+  /// (overlap_by_footprint_rows): counted by samples, a box's edge no longer let views of two faces register
+  /// and the constraint left faces unplanned (docs/quality.md). Not under exact cover with the constraint
+  /// (crease_samples_apply).
   int crease_footprint_samples = 0;
   double crease_angle_rad = 0.6981317007977318;  // 40°: every 90° edge, however its faces weigh the normal
   std::uint64_t seed = 1;
   /// Keep every evaluated candidate in the plan (ViewPlan::candidate_views), for benchmarks and diagnostics.
   bool keep_candidates = false;
 };
+
+/// Whether a plan predicts its crease rows by footprint samples (crease_footprint_samples > 0): under every
+/// cover but exact with the registration constraint, whose solver counts overlap in its matrix's own rows
+/// and not by footprint rows (exact_cover.hpp).
+inline bool crease_samples_apply(const PlannerSettings& s) {
+  return s.crease_footprint_samples > 0 && !(s.cover.mode == CoverMode::exact && registration_applies(s.cover));
+}
 
 SensorModel load_sensor(const std::filesystem::path& file, KeyDeclarations* declared = nullptr);
 ModelSpec load_spec(const std::filesystem::path& file);

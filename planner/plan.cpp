@@ -497,8 +497,8 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     const std::vector<double> row_weight = row_weights(p.rough, measured_rows, row_weight_scale);
     // The rows predicted by footprint samples: a replan's open rows, by what they lack (the caller's measured
     // coverage); or, in a single shot on a cell, every row by its whole footprint when
-    // matrix.cell_footprint_samples says so; else the rows on a crease (matrix.crease_footprint_samples) when
-    // the views need not register to each other (a cell job's cover, or --cover greedy). Only a replan's
+    // matrix.cell_footprint_samples says so; else the rows on a crease (matrix.crease_footprint_samples,
+    // crease_samples_apply). Only a replan's
     // also get candidates aimed at them (the stage's `footprints`): for every row of a single shot those are
     // five more per row, and 13-14 s more of plan for 5k rows (docs/quality.md).
     RowFootprints whole;
@@ -506,11 +506,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     if (!footprints && !measured_rows) {
       if (p.cell && settings.cell_footprint_samples > 0) {
         whole = whole_row_footprints(p.rough, spec, static_cast<std::size_t>(settings.cell_footprint_samples));
-      } else if (settings.crease_footprint_samples > 0 && !registration_applies(settings.cover)) {
-        // Not under the between-view constraint (eq. 4.2): split between its faces, a box's edge row no longer
-        // lets views of two faces at 90° overlap, and nothing else does at the spec, so a constrained cover
-        // stops with faces unplanned (a 120 x 80 x 40 box at 600 rows: 0.26 in free space, 0.60 on the
-        // turntable; docs/quality.md "Crease rows in free space"). Free space and on a cell alike.
+      } else if (crease_samples_apply(settings)) {
         whole = MeasuredCoverage(p.rough, spec)
                     .open_footprints(crease_rows(p.rough, settings.crease_angle_rad), static_cast<std::size_t>(settings.crease_footprint_samples));
       }
@@ -546,6 +542,12 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
       samples = cover_by_samples(matrix, row_weight, *predicted_by, scene, sensor, spec, candidates, settings.matrix,
                                  p.rough.mean_edge_mm, cancel,
                                  p.free_space_margin_applied ? &settings_in.matrix.countermeasures : nullptr);
+      // Under the between-view constraint (eq. 4.2) two views overlap on a footprint row when each measures
+      // some of its samples: counted by samples, a box's edge row no longer lets views of its two faces
+      // register, nothing else does at the spec, and the cover stopped with faces unplanned (a 120 x 80 x 40
+      // box at 600 rows: 0.26 in free space). exact_cover counts overlap in its own rows (crease_samples_apply).
+      if (registration_applies(settings.cover) && settings.cover.mode != CoverMode::exact)
+        samples->matrix.overlap = overlap_by_footprint_rows(*samples, *predicted_by, row_weight);
     }
     p.candidates = candidates.size();
     p.matrix_density = matrix.density();
@@ -877,11 +879,12 @@ std::string plan_summary(const ViewPlan& p) {
                 p.cover.registration_components, p.settings.cover.registration_threshold);
   os << buf << p.cover.stop_reason << "\n";
   if (p.rows_by_footprint_samples > 0) {
-    os << "rows predicted by footprint samples: " << p.rows_by_footprint_samples << "\n";
-  } else if (p.settings.crease_footprint_samples > 0 && registration_applies(p.settings.cover)) {
-    // Not silent: the settings ask for crease samples and this cover cannot use them (plan_views).
-    os << "crease rows: by the vertex under the registration constraint (matrix.crease_footprint_samples applies to "
-          "covers without it: --cover greedy, a cell job)\n";
+    os << "rows predicted by footprint samples: " << p.rows_by_footprint_samples
+       << (registration_applies(p.settings.cover) ? " (registration overlap counted by their rows)" : "") << "\n";
+  } else if (p.settings.crease_footprint_samples > 0 && !crease_samples_apply(p.settings)) {
+    // Not silent: the settings ask for crease samples and this cover cannot use them (crease_samples_apply).
+    os << "crease rows: by the vertex under exact cover with the registration constraint (matrix.crease_footprint_samples "
+          "applies to the greedy and constrained covers)\n";
   }
   std::snprintf(buf, sizeof buf,
                 "times (s): rough %.3f  scene %.3f  viewpoints %.3f  matrix %.3f  cover %.3f  total %.3f  (%d threads)\n",

@@ -46,6 +46,14 @@ void for_each_shared(const MeasurabilityColumn& a, const MeasurabilityColumn& b,
 
 }  // namespace
 
+OverlapView overlap_of(const MeasurabilityMatrix& m, const std::vector<double>& w) {
+  if (!m.overlap) return {m, w};
+  const OverlapRows& o = *m.overlap;
+  if (o.matrix.n_cols() != m.n_cols() || o.weight.size() != o.matrix.n_rows)
+    throw std::invalid_argument("registration overlap: one column per matrix column and one weight per row required");
+  return {o.matrix, o.weight};
+}
+
 double viewpoint_correlation(const MeasurabilityColumn& a, const MeasurabilityColumn& b, std::uint32_t m_s) {
   if (m_s == 0) return 0.0;
   std::uint32_t shared = 0;
@@ -66,14 +74,17 @@ namespace {
 class Greedy {
  public:
   Greedy(const MeasurabilityMatrix& m, const std::vector<double>& w, const CoverSettings& st)
-      : m_(m), w_(w), st_(st), covered_(m.n_rows, 0), chosen_(m.n_cols(), 0), constrained_(registration_applies(st)),
-        registrable_(m.n_cols(), constrained_ ? 0 : 1), checked_upto_(constrained_ ? m.n_cols() : 0, 0),
-        col_weight_(m.n_cols(), 0.0) {
+      : m_(m), w_(w), o_(overlap_of(m, w)), st_(st), covered_(m.n_rows, 0), chosen_(m.n_cols(), 0),
+        constrained_(registration_applies(st)), registrable_(m.n_cols(), constrained_ ? 0 : 1),
+        checked_upto_(constrained_ ? m.n_cols() : 0, 0), overlap_weight_(m.n_cols(), 0.0) {
     total_ = fill_unmeasurable(m, w, res_);
     for (std::uint32_t j = 0; j < m.n_cols(); ++j) {
-      m.columns[j].for_each([&](std::uint32_t r) { col_weight_[j] += w[r]; });
+      double cw = 0.0;
+      m.columns[j].for_each([&](std::uint32_t r) { cw += w[r]; });
       res_.max_column_count = std::max(res_.max_column_count, m.columns[j].count());
-      res_.max_column_weight = std::max(res_.max_column_weight, col_weight_[j]);
+      res_.max_column_weight = std::max(res_.max_column_weight, cw);
+      o_.m.columns[j].for_each([&](std::uint32_t r) { overlap_weight_[j] += o_.w[r]; });
+      max_overlap_weight_ = std::max(max_overlap_weight_, overlap_weight_[j]);
     }
     for (std::uint32_t j = 0; j < m.n_cols(); ++j) {
       const double g = gain_of(j);
@@ -102,12 +113,13 @@ class Greedy {
   /// σ_kj = shared weight / normaliser(k, j) (eq. 4.2).
   double sigma(std::uint32_t a, std::uint32_t b) const {
     const double norm = normaliser(a, b);
-    return norm > 0.0 ? shared_weight(m_.columns[a], m_.columns[b], w_) / norm : 0.0;
+    return norm > 0.0 ? shared(a, b) / norm : 0.0;
   }
 
  private:
+  double shared(std::uint32_t a, std::uint32_t b) const { return shared_weight(o_.m.columns[a], o_.m.columns[b], o_.w); }
   double normaliser(std::uint32_t a, std::uint32_t b) const {
-    return st_.normalizer == RegistrationNormalizer::max_view ? res_.max_column_weight : std::min(col_weight_[a], col_weight_[b]);
+    return st_.normalizer == RegistrationNormalizer::max_view ? max_overlap_weight_ : std::min(overlap_weight_[a], overlap_weight_[b]);
   }
   // σ_kj ≥ t_r  <=>  shared ≥ t_r · normaliser(k, j).
   double needed(std::uint32_t a, std::uint32_t b) const { return st_.registration_threshold * normaliser(a, b); }
@@ -117,8 +129,8 @@ class Greedy {
   bool registers(std::uint32_t j) {
     if (registrable_[j]) return true;
     for (std::uint32_t k = checked_upto_[j]; k < res_.views.size(); ++k) {
-      const double shared = shared_weight(m_.columns[j], m_.columns[res_.views[k]], w_);
-      if (shared > 0.0 && shared >= needed(j, res_.views[k])) {
+      const double sh = shared(j, res_.views[k]);
+      if (sh > 0.0 && sh >= needed(j, res_.views[k])) {
         registrable_[j] = 1;
         break;
       }
@@ -198,7 +210,7 @@ class Greedy {
       double pick_gain = -1.0, pick_shared = -1.0;
       for (std::uint32_t j = 0; j < m_.n_cols(); ++j) {
         if (chosen_[j] || j == target.col) continue;
-        const double sh = shared_weight(m_.columns[j], m_.columns[target.col], w_);
+        const double sh = shared(j, target.col);
         if (sh <= 0.0 || sh < needed(j, target.col) || !registers(j)) continue;
         const double g = gain_of(j);
         if (g > pick_gain || (g == pick_gain && sh > pick_shared)) {
@@ -218,6 +230,7 @@ class Greedy {
 
   const MeasurabilityMatrix& m_;
   const std::vector<double>& w_;
+  const OverlapView o_;  // what σ counts (overlap_of)
   const CoverSettings& st_;
   CoverResult res_;
   double total_ = 0.0, covered_w_ = 0.0;
@@ -226,7 +239,8 @@ class Greedy {
   const bool constrained_;
   std::vector<char> registrable_;
   std::vector<std::uint32_t> checked_upto_;
-  std::vector<double> col_weight_;
+  std::vector<double> overlap_weight_;  // per column, in the overlap's rows
+  double max_overlap_weight_ = 0.0;
   std::priority_queue<Entry> heap_;
   std::vector<Entry> waiting_;  // fresh-best candidates that cannot register yet
 };
@@ -266,14 +280,15 @@ CoverResult greedy_cover(const MeasurabilityMatrix& m, const std::vector<double>
 
 double registration_sigma(const MeasurabilityMatrix& m, const std::vector<double>& w, const CoverSettings& st,
                           std::uint32_t a, std::uint32_t b, double max_column_weight) {
+  const OverlapView o = overlap_of(m, w);
   double norm = max_column_weight;
   if (st.normalizer == RegistrationNormalizer::smaller_view) {
     double wa = 0.0, wb = 0.0;
-    m.columns[a].for_each([&](std::uint32_t r) { wa += w[r]; });
-    m.columns[b].for_each([&](std::uint32_t r) { wb += w[r]; });
+    o.m.columns[a].for_each([&](std::uint32_t r) { wa += o.w[r]; });
+    o.m.columns[b].for_each([&](std::uint32_t r) { wb += o.w[r]; });
     norm = std::min(wa, wb);
   }
-  return norm > 0.0 ? shared_weight(m.columns[a], m.columns[b], w) / norm : 0.0;
+  return norm > 0.0 ? shared_weight(o.m.columns[a], o.m.columns[b], o.w) / norm : 0.0;
 }
 
 namespace {
@@ -291,8 +306,9 @@ double max_column_weight(const MeasurabilityMatrix& m, const std::vector<double>
 }
 
 /// σ ≥ t_r between every pair of `views` (computed once: the passes below ask O(k³) questions of it).
-std::vector<std::vector<char>> registration_adjacency(const MeasurabilityMatrix& m, const std::vector<double>& w,
+std::vector<std::vector<char>> registration_adjacency(const MeasurabilityMatrix& cover_m, const std::vector<double>& cover_w,
                                                       const CoverSettings& st, const std::vector<std::uint32_t>& views) {
+  const auto [m, w] = overlap_of(cover_m, cover_w);
   const std::size_t k = views.size();
   std::vector<double> vw(k);
   for (std::size_t i = 0; i < k; ++i) vw[i] = column_weight(m.columns[views[i]], w);
@@ -410,13 +426,15 @@ CoverResult describe_cover(const MeasurabilityMatrix& m, const std::vector<doubl
     res.cumulative_fraction.push_back(total > 0 ? covered_w / total : 0.0);
     res.cumulative_point_fraction.push_back(m.n_rows ? static_cast<double>(covered_n) / m.n_rows : 0.0);
   }
+  const OverlapView o = overlap_of(m, w);
   std::vector<double> vw(views.size());
-  for (std::size_t i = 0; i < views.size(); ++i) vw[i] = column_weight(m.columns[views[i]], w);
+  for (std::size_t i = 0; i < views.size(); ++i) vw[i] = column_weight(o.m.columns[views[i]], o.w);
+  const double ms = st.normalizer == RegistrationNormalizer::max_view ? max_column_weight(o.m, o.w) : 0.0;
   UnionFind uf(views.size());
   for (std::uint32_t a = 0; a < views.size(); ++a)
     for (std::uint32_t b = a + 1; b < views.size(); ++b) {
-      const double norm = st.normalizer == RegistrationNormalizer::max_view ? res.max_column_weight : std::min(vw[a], vw[b]);
-      const double s = norm > 0.0 ? shared_weight(m.columns[views[a]], m.columns[views[b]], w) / norm : 0.0;
+      const double norm = st.normalizer == RegistrationNormalizer::max_view ? ms : std::min(vw[a], vw[b]);
+      const double s = norm > 0.0 ? shared_weight(o.m.columns[views[a]], o.m.columns[views[b]], o.w) / norm : 0.0;
       if (s >= st.registration_threshold && s > 0.0) {
         res.registration_edges.push_back({a, b, s});
         uf.unite(a, b);

@@ -79,6 +79,14 @@ struct CoverResult {
   std::string stop_reason;
 };
 
+/// The columns and weights the registration constraint counts overlap in: the matrix's `overlap` when it has
+/// one (checked: a column per column, a weight per row), else the matrix itself with the cover's weights.
+struct OverlapView {
+  const MeasurabilityMatrix& m;
+  const std::vector<double>& w;
+};
+OverlapView overlap_of(const MeasurabilityMatrix& m, const std::vector<double>& row_weight);
+
 /// σ_kj of eq. 4.1: shared rows of two columns over m_S.
 double viewpoint_correlation(const MeasurabilityColumn& a, const MeasurabilityColumn& b, std::uint32_t m_s);
 

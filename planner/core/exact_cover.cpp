@@ -733,6 +733,9 @@ CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>&
                         const std::vector<double>& cost_in, ExactReport* report) {
   const auto t0 = Clock::now();
   if (w.size() != m.n_rows) throw std::invalid_argument("exact_cover: one weight per row required");
+  if (m.overlap && registration_applies(st))
+    throw std::invalid_argument("exact_cover: the registration constraint counts overlap in the matrix's own rows, not in "
+                                "MeasurabilityMatrix::overlap");
   if (st.coverage_goal < 1.0 - 1e-12)
     throw ConfigError("cover.mode exact covers every measurable row: the spec's coverage_goal must be 1");
   ExactReport rep;

@@ -1,6 +1,7 @@
 #include "planner/core/footprint.hpp"
 
 #include <algorithm>
+#include <stdexcept>
 #include <string>
 
 #include "common/errors.hpp"
@@ -75,7 +76,7 @@ SampleCover cover_by_samples(const MeasurabilityMatrix& matrix, const std::vecto
   samples.mean_edge_mm = mean_edge_mm;  // the same ray offset as the rows'
   // With a margin (`plain`: the test without it), a sample keeps what the plain test gives it when the margin
   // leaves it no view, as the rows do (keep_plain_elements_of_lost_rows).
-  MeasurabilityMatrix by_sample{0, std::vector<MeasurabilityColumn>(candidates.size())};
+  MeasurabilityMatrix by_sample{0, std::vector<MeasurabilityColumn>(candidates.size()), nullptr};
   if (!f.points.empty()) {
     PlainElements plain_elements{plain ? *plain : Countermeasures{}, {}};
     by_sample = build_measurability(samples, scene, sensor, spec, candidates, settings, nullptr, cancel,
@@ -118,6 +119,19 @@ std::vector<std::uint32_t> column_rows(const SampleCover& c, const RowFootprints
   std::sort(rows.begin(), rows.end());
   rows.erase(std::unique(rows.begin(), rows.end()), rows.end());
   return rows;
+}
+
+std::shared_ptr<const OverlapRows> overlap_by_footprint_rows(const SampleCover& c, const RowFootprints& f,
+                                                             const std::vector<double>& row_weight) {
+  if (row_weight.size() != c.n_rows) throw std::invalid_argument("overlap_by_footprint_rows: one weight per rough-model row required");
+  auto o = std::make_shared<OverlapRows>();
+  o->matrix.n_rows = c.n_rows;
+  o->matrix.columns.reserve(c.matrix.n_cols());
+  const std::vector<std::uint8_t> any_sample(c.n_rows, 1);
+  for (std::uint32_t j = 0; j < c.matrix.n_cols(); ++j)
+    o->matrix.columns.emplace_back(column_rows(c, f, j, any_sample), c.n_rows);
+  o->weight = row_weight;
+  return o;
 }
 
 }  // namespace scancell::planner

@@ -61,4 +61,13 @@ std::vector<std::uint8_t> finished_rows(const SampleCover& c, const RowFootprint
 std::vector<std::uint32_t> column_rows(const SampleCover& c, const RowFootprints& footprints, std::uint32_t column,
                                        const std::vector<std::uint8_t>& finished);
 
+/// What the registration constraint counts two views' overlap in on a cover by samples (eq. 4.1-4.2,
+/// MeasurabilityMatrix::overlap): the rough model's rows with `row_weight`, a footprint row shared by two
+/// views when each measures some of its samples. So a box's edge row still lets views of its two faces
+/// register, as its vertex does when judged by the vertex: split into samples, neither view measures the
+/// other's face, and at the thesis spec no view measures both (a 120 x 80 x 40 box at 600 rows stopped at
+/// 0.26 with samples counted apart; docs/quality.md "Crease rows in free space").
+std::shared_ptr<const OverlapRows> overlap_by_footprint_rows(const SampleCover& c, const RowFootprints& footprints,
+                                                             const std::vector<double>& row_weight);
+
 }  // namespace scancell::planner

@@ -292,8 +292,9 @@ class Search {
 std::size_t registration_component_count(const MeasurabilityMatrix& m, const std::vector<double>& w,
                                          const CoverSettings& st, const std::vector<std::uint32_t>& views) {
   if (views.empty()) return 0;
-  const RowIndex ix = index_rows(m, w);
-  Registration reg(m, w, st, ix);
+  const OverlapView o = overlap_of(m, w);
+  const RowIndex ix = index_rows(o.m, o.w);
+  Registration reg(o.m, o.w, st, ix);
   std::vector<std::uint32_t> label;
   return reg.components(views, label);
 }
@@ -312,8 +313,11 @@ std::vector<std::uint32_t> local_search_cover(const MeasurabilityMatrix& m, cons
     std::vector<char> need(m.n_rows, 0);
     for (auto j : start) m.columns[j].for_each([&](std::uint32_t r) { need[r] = w[r] > 0.0; });
     Search s(m, ix, need);
-    Registration reg(m, w, st, ix);
     const bool registration = registration_applies(st);
+    // Registration counts overlap in its own rows when the matrix says so (MeasurabilityMatrix::overlap).
+    const OverlapView o = overlap_of(m, w);
+    const RowIndex overlap_ix = registration && m.overlap ? index_rows(o.m, o.w) : RowIndex{};
+    Registration reg(o.m, o.w, st, registration && m.overlap ? overlap_ix : ix);
     std::uint64_t now = 1;
     for (auto j : start) s.add(j, now);
     rep.work_at_last_improvement = s.work();

@@ -4,6 +4,7 @@
 // m_ij = 1 when point i lies in viewpoint j's frustum, is visible to both laser and receiver, and its
 // predicted precision (eq. 3.4) and sampling density (eq. 3.8) meet the model specification.
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "planner/core/rough_model.hpp"
@@ -47,9 +48,15 @@ class MeasurabilityColumn {
   std::uint32_t count_ = 0;
 };
 
+struct OverlapRows;
+
 struct MeasurabilityMatrix {
   std::uint32_t n_rows = 0;
   std::vector<MeasurabilityColumn> columns;
+  /// What the registration constraint (eq. 4.1-4.2) judges two columns' overlap by, when not by these rows
+  /// and the cover's weights: the same columns over other rows (a cover by footprint samples shares a row
+  /// between two views when each measures some of its samples: footprint.hpp). Null: these rows.
+  std::shared_ptr<const OverlapRows> overlap;
 
   std::size_t n_cols() const { return columns.size(); }
   std::size_t nonzeros() const;
@@ -57,6 +64,12 @@ struct MeasurabilityMatrix {
   std::size_t memory_bytes() const;
   /// Rows no column measures.
   std::vector<std::uint32_t> unmeasurable_rows() const;
+};
+
+/// The rows and weights two columns' registration overlap is counted in (MeasurabilityMatrix::overlap).
+struct OverlapRows {
+  MeasurabilityMatrix matrix;  // one column per column of the matrix it belongs to; no overlap of its own
+  std::vector<double> weight;  // per row of `matrix`
 };
 
 struct MatrixStats {

@@ -42,9 +42,17 @@ declare -A landed=([plan]=0 [move]=0 [sweep]=0 [store]=0 [other]=0)
 phase_now() { tail -n 1 "$TRACE" 2>/dev/null; }
 for i in $(seq "$N"); do
   if [ $((i % 3)) = 0 ]; then
-    # Aimed: as soon as a sweep has ended and its view is not yet durable (registering, storing).
-    for _ in $(seq 4000); do
-      case "$(phase_now)" in registering|storing) break ;; esac
+    # Aimed: as soon as a sweep has ended and its view is not yet durable (registering, storing). The daemon
+    # is stopped (SIGSTOP, every thread) and the phase read again, so the kill lands where it was seen: on a
+    # loaded host the store window could pass between the read and the kill (1 aimed kill in 6 did, beside
+    # two busy loops, and the run failed its store share once in a full ctest -j2).
+    for _ in $(seq 10000); do
+      case "$(phase_now)" in
+        registering|storing)
+          kill -STOP "$DAEMON_PID"
+          case "$(phase_now)" in registering|storing) break ;; esac
+          kill -CONT "$DAEMON_PID" ;;
+      esac
       sleep 0.002
     done
   else

@@ -676,21 +676,37 @@ TEST(Plan, TheRowsOnACreaseAreTheBoxsEdgesAndASingleShotMeasuresThemByTheirFaces
   EXPECT_EQ(fc_short, 0u);
   EXPECT_EQ(fc_missed, 0u);
 
-  // Under the between-view registration constraint (scancell plan's default cover) the crease rows keep the
-  // vertex test: split between its faces, an edge row lets no views of two faces at 90° overlap, and at this
-  // spec nothing else does, so the constrained cover stopped with faces unplanned (a welded 120 × 80 × 40 mm
-  // box in free space, 600 rows: estimated 0.38 in 4 views with samples). With the vertex test it covers it.
+  // Under the between-view registration constraint (scancell plan's default cover) two views overlap on a
+  // crease row when each measures some of its samples (overlap_by_footprint_rows). Counted by samples, an
+  // edge row let no views of two faces at 90° overlap, at this spec nothing else did, and the constrained
+  // cover stopped with faces unplanned (a welded 120 × 80 × 40 mm box in free space, 600 rows: estimated 0.38
+  // in 4 views, session 31). Now it covers the box, registered, in fewer views than by the vertex.
   PlannerSettings constrained;
   constrained.crease_footprint_samples = 4;
   ASSERT_TRUE(registration_applies(constrained.cover));
+  ASSERT_TRUE(crease_samples_apply(constrained));
+  PlannerSettings constrained_by_vertex = constrained;
+  constrained_by_vertex.crease_footprint_samples = 0;
   RoughModelOptions coarse;
   coarse.target_vertices = 600;
-  const ViewPlan k = plan_views(welded_box({-60, -40, 0}, {60, 40, 40}), sensor, spec, constrained, coarse, 2);
+  const TriangleMesh flat_box = welded_box({-60, -40, 0}, {60, 40, 40});
+  const ViewPlan k = plan_views(flat_box, sensor, spec, constrained, coarse, 2);
+  const ViewPlan kv = plan_views(flat_box, sensor, spec, constrained_by_vertex, coarse, 2);
   ASSERT_FALSE(k.cover.cumulative_fraction.empty());
+  ASSERT_FALSE(kv.cover.cumulative_fraction.empty());
   const double estimate = k.cover.cumulative_fraction.back();
-  std::printf("welded 120 x 80 x 40 box in free space, 600 rows, constrained: %zu views, estimate %.4f\n", k.views.size(), estimate);
+  std::printf("welded 120 x 80 x 40 box in free space, 600 rows, constrained: by crease samples %zu views, estimate %.4f, "
+              "%zu components; by the vertex %zu views, %.4f\n",
+              k.views.size(), estimate, k.cover.registration_components, kv.views.size(), kv.cover.cumulative_fraction.back());
   EXPECT_GT(estimate, 0.99);
-  EXPECT_EQ(k.rows_by_footprint_samples, 0u);
+  EXPECT_EQ(k.cover.registration_components, 1u);
+  EXPECT_EQ(k.rows_by_footprint_samples, crease_rows(k.rough, constrained.crease_angle_rad).size());
+  EXPECT_GT(k.rows_by_footprint_samples, 0u);
+  EXPECT_LT(k.views.size(), kv.views.size());
+  // Exact cover with the constraint counts overlap in its own rows: the crease rows keep the vertex test.
+  PlannerSettings exact = constrained;
+  exact.cover.mode = CoverMode::exact;
+  EXPECT_FALSE(crease_samples_apply(exact));
 }
 
 }  // namespace

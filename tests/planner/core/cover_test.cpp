@@ -2,6 +2,8 @@
 #include <gtest/gtest.h>
 
 #include "planner/core/cover.hpp"
+#include "planner/core/exact_cover.hpp"
+#include "planner/core/local_cover.hpp"
 
 namespace scancell::planner {
 namespace {
@@ -104,6 +106,43 @@ TEST(Constrained, ViewsRegisteredToTheModelCoverTheRestWithoutIt) {
   exact.mode = CoverMode::exact;
   EXPECT_EQ(registered_to_model(exact).mode, CoverMode::exact);
   EXPECT_TRUE(registration_applies(registered_to_model(exact)));
+}
+
+TEST(Constrained, OverlapCountedInOtherRowsLetsTwoFacesRegister) {
+  // The instance above as a cover by footprint samples sees a box's edge: rows 0-2 are samples on face A,
+  // rows 3-5 on face B, and no view measures both faces, so their views share no sample and cannot register.
+  // Counted in the rough model's rows (MeasurabilityMatrix::overlap: face A 4 mm², the edge row 1 mm², face B
+  // 4 mm²) both views measure some of the edge row's samples: σ = 1 / min(5, 5) = 0.2 ≥ t_r, and the
+  // constrained cover takes both.
+  auto m = matrix(6, {{0, 1, 2}, {3, 4, 5}});
+  auto o = std::make_shared<OverlapRows>();
+  o->matrix = matrix(3, {{0, 1}, {1, 2}});
+  o->weight = {4.0, 1.0, 4.0};
+  m.overlap = o;
+  CoverSettings con;
+  con.registration_threshold = 0.1;
+  const CoverResult c = greedy_cover(m, ones(6), con);
+  EXPECT_EQ(c.views, (std::vector<std::uint32_t>{0, 1}));
+  EXPECT_DOUBLE_EQ(c.cumulative_fraction.back(), 1.0);
+  EXPECT_EQ(c.registration_components, 1u);
+  ASSERT_EQ(c.registration_edges.size(), 1u);
+  EXPECT_NEAR(c.registration_edges[0].sigma, 0.2, 1e-12);
+  EXPECT_NEAR(registration_sigma(m, ones(6), con, 0, 1, 0.0), 0.2, 1e-12);
+  EXPECT_EQ(describe_cover(m, ones(6), con, {1, 0}).registration_components, 1u);
+  EXPECT_EQ(registration_component_count(m, ones(6), con, {0, 1}), 1u);
+  // Above t_r = 0.2 the edge no longer suffices (the check is on the overlap's weights, not the samples').
+  con.registration_threshold = 0.25;
+  EXPECT_EQ(greedy_cover(m, ones(6), con).views.size(), 1u);
+
+  // A malformed overlap is refused, and so is exact cover with the constraint (CBC counts the matrix's rows).
+  auto bad = std::make_shared<OverlapRows>(*o);
+  bad->weight.pop_back();
+  m.overlap = bad;
+  EXPECT_THROW(greedy_cover(m, ones(6), con), std::invalid_argument);
+  m.overlap = o;
+  CoverSettings exact;
+  exact.mode = CoverMode::exact;
+  EXPECT_THROW(exact_cover(m, ones(6), exact), std::invalid_argument);
 }
 
 }  // namespace
