@@ -498,9 +498,9 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     // The rows predicted by footprint samples: a replan's open rows, by what they lack (the caller's measured
     // coverage); or, in a single shot on a cell, every row by its whole footprint when
     // matrix.cell_footprint_samples says so; else the rows on a crease (matrix.crease_footprint_samples,
-    // crease_samples_apply). Only a replan's
-    // also get candidates aimed at them (the stage's `footprints`): for every row of a single shot those are
-    // five more per row, and 13-14 s more of plan for 5k rows (docs/quality.md).
+    // crease_samples_apply). Only a replan's also get candidates aimed at them (the stage's `footprints`): for
+    // every row of a single shot those are five more per row, and 13-14 s more of plan for 5k rows
+    // (docs/quality.md).
     RowFootprints whole;
     const RowFootprints* predicted_by = footprints;
     if (!footprints && !measured_rows) {
@@ -546,7 +546,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
       // some of its samples: counted by samples, a box's edge row no longer lets views of its two faces
       // register, nothing else does at the spec, and the cover stopped with faces unplanned (a 120 x 80 x 40
       // box at 600 rows: 0.26 in free space). exact_cover counts overlap in its own rows (crease_samples_apply).
-      if (registration_applies(settings.cover) && settings.cover.mode != CoverMode::exact)
+      if (settings.cover.mode == CoverMode::constrained)
         samples->matrix.overlap = overlap_by_footprint_rows(*samples, *predicted_by, row_weight);
     }
     p.candidates = candidates.size();
@@ -880,7 +880,7 @@ std::string plan_summary(const ViewPlan& p) {
   os << buf << p.cover.stop_reason << "\n";
   if (p.rows_by_footprint_samples > 0) {
     os << "rows predicted by footprint samples: " << p.rows_by_footprint_samples
-       << (registration_applies(p.settings.cover) ? " (registration overlap counted by their rows)" : "") << "\n";
+       << (p.settings.cover.mode == CoverMode::constrained ? " (registration overlap counted by their rows)" : "") << "\n";
   } else if (p.settings.crease_footprint_samples > 0 && !crease_samples_apply(p.settings)) {
     // Not silent: the settings ask for crease samples and this cover cannot use them (crease_samples_apply).
     os << "crease rows: by the vertex under exact cover with the registration constraint (matrix.crease_footprint_samples "
