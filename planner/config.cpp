@@ -182,6 +182,7 @@ void read_viewpoints(Section v, ViewpointSettings& vs) {
   vs.cell_native = v.get_or<bool>("cell_native", vs.cell_native);
   vs.cell_oblique_rad = v.ranged("cell_oblique_rad", vs.cell_oblique_rad, 0.0, 0.8);
   vs.cell_standoff_steps = v.ranged("cell_standoff_steps", vs.cell_standoff_steps, 1, 8);
+  vs.cell_face_aim_min_angle_rad = v.ranged("cell_face_aim_min_angle_rad", vs.cell_face_aim_min_angle_rad, 0.0, 1.5);
   v.finish();
 }
 

@@ -5,6 +5,8 @@
 #include <map>
 #include <numbers>
 #include <optional>
+#include <stdexcept>
+#include <string>
 
 #include <tbb/parallel_for.h>
 
@@ -276,6 +278,34 @@ std::vector<Viewpoint> cell_viewpoints_at(const std::vector<AimPoint>& aims, con
   }
   rep.candidates = out.size();
   if (report) *report = rep;
+  return out;
+}
+
+// Where the rough surface bends (a cleft, a rim by the plate, a crease), the vertex normal is a mean no face has,
+// and a view along it sees every face at an angle: with samples judging a row by its faces
+// (matrix.cell_footprint_samples) such views finish it (knot1 on the turntable: docs/quality.md).
+std::vector<AimPoint> face_aims(const RoughModel& rough, const std::vector<std::uint32_t>& rows, double min_angle_rad, double standoff_mm) {
+  constexpr std::size_t kMaxFacesPerRow = 3;
+  std::vector<std::vector<std::uint32_t>> incident(rough.size());
+  for (std::uint32_t t = 0; t < rough.triangles.size(); ++t)
+    for (const auto v : rough.triangles[t]) incident[v].push_back(t);
+  const double max_cos = std::cos(min_angle_rad);
+  std::vector<AimPoint> out;
+  for (const auto r : rows) {
+    if (r >= rough.size()) throw std::out_of_range("face_aims: row " + std::to_string(r) + " past the " + std::to_string(rough.size()) + " rows");
+    std::vector<Eigen::Vector3d> kept{rough.normals[r]};
+    for (const auto t : incident[r]) {
+      if (kept.size() > kMaxFacesPerRow) break;
+      const auto& tri = rough.triangles[t];
+      const Eigen::Vector3d n = (rough.points[tri[1]] - rough.points[tri[0]]).cross(rough.points[tri[2]] - rough.points[tri[0]]);
+      if (!(n.norm() > 1e-12)) continue;
+      const Eigen::Vector3d u = n.normalized();
+      if (std::any_of(kept.begin(), kept.end(), [&](const Eigen::Vector3d& k) { return k.dot(u) > max_cos; })) continue;
+      kept.push_back(u);
+      const Eigen::Vector3d centroid = (rough.points[tri[0]] + rough.points[tri[1]] + rough.points[tri[2]]) / 3.0;
+      out.push_back({rough.points[r] + 0.5 * (centroid - rough.points[r]), u, standoff_mm, static_cast<std::int32_t>(r)});
+    }
+  }
   return out;
 }
 

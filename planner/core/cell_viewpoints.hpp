@@ -70,4 +70,10 @@ std::vector<Viewpoint> cell_viewpoints_at(const std::vector<AimPoint>& aims, con
                                           const ViewpointSettings& settings, const CellModel& cell,
                                           const CollisionChecker& checker, CellGenerationReport* report = nullptr);
 
+/// Aims square to the faces of `rows` (viewpoints.cell_face_aim_min_angle_rad): per row, each adjacent triangle
+/// whose normal turns more than `min_angle_rad` from the row's normal and from the faces already kept (at most
+/// three), aimed at halfway from the row to the triangle's centroid (inside the row's footprint) along that
+/// normal, at `standoff_mm`, credited to the row. Ascending rows give aims in row order.
+std::vector<AimPoint> face_aims(const RoughModel& rough, const std::vector<std::uint32_t>& rows, double min_angle_rad, double standoff_mm);
+
 }  // namespace scancell::planner

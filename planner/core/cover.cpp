@@ -69,6 +69,18 @@ double shared_weight(const MeasurabilityColumn& a, const MeasurabilityColumn& b,
 
 namespace {
 
+double column_weight(const MeasurabilityColumn& c, const std::vector<double>& w) {
+  double s = 0.0;
+  c.for_each([&](std::uint32_t r) { s += w[r]; });
+  return s;
+}
+
+double max_column_weight(const MeasurabilityMatrix& m, const std::vector<double>& w) {
+  double best = 0.0;
+  for (const auto& c : m.columns) best = std::max(best, column_weight(c, w));
+  return best;
+}
+
 /// Greedy set cover of M by gain (thesis 4.3), with lazy gains in a heap, and the registration constraint
 /// (eq. 4.2, thesis 4.4.3) checked lazily: only for candidates that reach the top of the heap.
 class Greedy {
@@ -79,11 +91,10 @@ class Greedy {
         checked_upto_(constrained_ ? m.n_cols() : 0, 0), overlap_weight_(m.n_cols(), 0.0) {
     total_ = fill_unmeasurable(m, w, res_);
     for (std::uint32_t j = 0; j < m.n_cols(); ++j) {
-      double cw = 0.0;
-      m.columns[j].for_each([&](std::uint32_t r) { cw += w[r]; });
+      const double cw = column_weight(m.columns[j], w);
       res_.max_column_count = std::max(res_.max_column_count, m.columns[j].count());
       res_.max_column_weight = std::max(res_.max_column_weight, cw);
-      o_.m.columns[j].for_each([&](std::uint32_t r) { overlap_weight_[j] += o_.w[r]; });
+      overlap_weight_[j] = m.overlap ? column_weight(o_.m.columns[j], o_.w) : cw;
       max_overlap_weight_ = std::max(max_overlap_weight_, overlap_weight_[j]);
     }
     for (std::uint32_t j = 0; j < m.n_cols(); ++j) {
@@ -282,28 +293,11 @@ double registration_sigma(const MeasurabilityMatrix& m, const std::vector<double
                           std::uint32_t a, std::uint32_t b, double max_column_weight) {
   const OverlapView o = overlap_of(m, w);
   double norm = max_column_weight;
-  if (st.normalizer == RegistrationNormalizer::smaller_view) {
-    double wa = 0.0, wb = 0.0;
-    o.m.columns[a].for_each([&](std::uint32_t r) { wa += o.w[r]; });
-    o.m.columns[b].for_each([&](std::uint32_t r) { wb += o.w[r]; });
-    norm = std::min(wa, wb);
-  }
+  if (st.normalizer == RegistrationNormalizer::smaller_view) norm = std::min(column_weight(o.m.columns[a], o.w), column_weight(o.m.columns[b], o.w));
   return norm > 0.0 ? shared_weight(o.m.columns[a], o.m.columns[b], o.w) / norm : 0.0;
 }
 
 namespace {
-
-double column_weight(const MeasurabilityColumn& c, const std::vector<double>& w) {
-  double s = 0.0;
-  c.for_each([&](std::uint32_t r) { s += w[r]; });
-  return s;
-}
-
-double max_column_weight(const MeasurabilityMatrix& m, const std::vector<double>& w) {
-  double best = 0.0;
-  for (const auto& c : m.columns) best = std::max(best, column_weight(c, w));
-  return best;
-}
 
 /// σ ≥ t_r between every pair of `views` (computed once: the passes below ask O(k³) questions of it).
 std::vector<std::vector<char>> registration_adjacency(const MeasurabilityMatrix& cover_m, const std::vector<double>& cover_w,
@@ -403,10 +397,8 @@ CoverResult describe_cover(const MeasurabilityMatrix& m, const std::vector<doubl
   CoverResult res;
   const double total = fill_unmeasurable(m, w, res);
   for (std::uint32_t j = 0; j < m.n_cols(); ++j) {
-    double cw = 0.0;
-    m.columns[j].for_each([&](std::uint32_t r) { cw += w[r]; });
     res.max_column_count = std::max(res.max_column_count, m.columns[j].count());
-    res.max_column_weight = std::max(res.max_column_weight, cw);
+    res.max_column_weight = std::max(res.max_column_weight, column_weight(m.columns[j], w));
   }
   std::vector<char> covered(m.n_rows, 0);
   double covered_w = 0.0;
@@ -429,7 +421,9 @@ CoverResult describe_cover(const MeasurabilityMatrix& m, const std::vector<doubl
   const OverlapView o = overlap_of(m, w);
   std::vector<double> vw(views.size());
   for (std::size_t i = 0; i < views.size(); ++i) vw[i] = column_weight(o.m.columns[views[i]], o.w);
-  const double ms = st.normalizer == RegistrationNormalizer::max_view ? max_column_weight(o.m, o.w) : 0.0;
+  const double ms = st.normalizer != RegistrationNormalizer::max_view ? 0.0
+                   : m.overlap                                     ? max_column_weight(o.m, o.w)
+                                                                   : res.max_column_weight;
   UnionFind uf(views.size());
   for (std::uint32_t a = 0; a < views.size(); ++a)
     for (std::uint32_t b = a + 1; b < views.size(); ++b) {

@@ -207,48 +207,66 @@ class ColumnWorker {
   }
 
   /// Candidate v's column (rows ascending) and, with a plain matrix, its plain column; counted into `cnt`.
-  void build(const Viewpoint& v, std::vector<std::uint32_t>& column, std::vector<std::uint32_t>& plain_column, Counters& cnt) {
-    const Eigen::Matrix3d r = v.rotation();
-    const Eigen::Matrix3d rt = r.transpose();
+  /// With `only` (ascending rows), those rows alone are tested, without block culling; the rest count as culled.
+  void build(const Viewpoint& v, std::vector<std::uint32_t>& column, std::vector<std::uint32_t>& plain_column, Counters& cnt,
+             const std::vector<std::uint32_t>* only = nullptr) {
+    r_ = v.rotation();
+    rt_ = r_.transpose();
     const auto n_rows = static_cast<std::uint32_t>(rough_.size());
-    std::uint64_t culled = 0, in_frustum = 0, surviving = 0, compliant = 0;
+    tally_ = {};
     column.clear();
     plain_column.clear();
-    for (std::uint32_t b = 0; b < blocks_.size(); ++b) {
-      const std::uint32_t begin = b * kBlock, end = std::min<std::uint32_t>(begin + kBlock, n_rows);
-      if (!sphere_may_touch_frustum(lv_.wide.sensor, lv_.wide.terms, v.scan_length_mm * lv_.wide.length_factor,
-                                    rt * (blocks_[b].centre - v.position), blocks_[b].radius)) {
-        culled += end - begin;
-        continue;
+    if (only) {
+      for (std::size_t k = 0; k < only->size(); ++k) {
+        const std::uint32_t i = (*only)[k];
+        if (i >= n_rows || (k > 0 && i <= (*only)[k - 1]))
+          throw std::invalid_argument("build_measurability: the rows to test are not ascending rows of the model");
+        test_row(v, i, column, plain_column);
       }
-      for (std::uint32_t i = begin; i < end; ++i) {
-        const Eigen::Vector3d pc = rt * (rough_.points[i] - v.position);
-        const Eigen::Vector3d nc = rt * rough_.normals[i];
-        const PointTest t = lv_.tight.test(v.scan_length_mm, pc, nc);
-        in_frustum += t.in_frustum;
-        surviving += t.facing;
-        compliant += t.compliant;
-        if (!t.compliant && (lv_.same_test || !lv_.wide.test(v.scan_length_mm, pc, nc).compliant)) continue;
-        pending_.push_back({i, t.compliant, t});
-        rays_.resize(rays_.size() + lv_.wide_rays);
-        OcclusionRay* out = &rays_[rays_.size() - lv_.wide_rays];
-        out += pair_rays(rough_.points[i], rough_.normals[i], v, r, t, eps_, 0.0, out);
-        if (lv_.wide.margin_mm > 0.0) pair_rays(rough_.points[i], rough_.normals[i], v, r, t, eps_, lv_.wide.margin_mm, out);
-        if (pending_.size() == kPairsPerFlush) flush(v, r, column, plain_column);
+      tally_.culled = n_rows - only->size();
+    } else {
+      for (std::uint32_t b = 0; b < blocks_.size(); ++b) {
+        const std::uint32_t begin = b * kBlock, end = std::min<std::uint32_t>(begin + kBlock, n_rows);
+        if (!sphere_may_touch_frustum(lv_.wide.sensor, lv_.wide.terms, v.scan_length_mm * lv_.wide.length_factor,
+                                      rt_ * (blocks_[b].centre - v.position), blocks_[b].radius)) {
+          tally_.culled += end - begin;
+          continue;
+        }
+        for (std::uint32_t i = begin; i < end; ++i) test_row(v, i, column, plain_column);
       }
     }
-    flush(v, r, column, plain_column);
+    flush(v, r_, column, plain_column);
     if (plain_) std::sort(plain_column.begin(), plain_column.end());  // rows the near-miss rays failed joined late
-    cnt.block_culled += culled;
-    cnt.in_frustum += in_frustum;
-    cnt.surviving += surviving;
-    cnt.compliant += compliant;
+    cnt.block_culled += tally_.culled;
+    cnt.in_frustum += tally_.in_frustum;
+    cnt.surviving += tally_.surviving;
+    cnt.compliant += tally_.compliant;
     cnt.measurable += column.size();
   }
 
   std::uint64_t rays_cast = 0;
 
  private:
+  /// Row i against the current candidate (r_, rt_): the analytic test, then its rays queued.
+  void test_row(const Viewpoint& v, std::uint32_t i, std::vector<std::uint32_t>& column, std::vector<std::uint32_t>& plain_column) {
+    const Eigen::Vector3d pc = rt_ * (rough_.points[i] - v.position);
+    const Eigen::Vector3d nc = rt_ * rough_.normals[i];
+    const PointTest t = lv_.tight.test(v.scan_length_mm, pc, nc);
+    tally_.in_frustum += t.in_frustum;
+    tally_.surviving += t.facing;
+    tally_.compliant += t.compliant;
+    if (!t.compliant && (lv_.same_test || !lv_.wide.test(v.scan_length_mm, pc, nc).compliant)) return;
+    pending_.push_back({i, t.compliant, t});
+    rays_.resize(rays_.size() + lv_.wide_rays);
+    OcclusionRay* out = &rays_[rays_.size() - lv_.wide_rays];
+    out += pair_rays(rough_.points[i], rough_.normals[i], v, r_, t, eps_, 0.0, out);
+    if (lv_.wide.margin_mm > 0.0) pair_rays(rough_.points[i], rough_.normals[i], v, r_, t, eps_, lv_.wide.margin_mm, out);
+    if (pending_.size() == kPairsPerFlush) flush(v, r_, column, plain_column);
+  }
+
+  struct Tally {
+    std::uint64_t culled = 0, in_frustum = 0, surviving = 0, compliant = 0;
+  };
   struct Pending {
     std::uint32_t row;
     bool tight;  // the tight test is compliant too
@@ -300,6 +318,8 @@ class ColumnWorker {
   std::vector<OcclusionRay> rays_, extra_rays_;
   std::vector<std::uint8_t> occ_, extra_occ_;
   std::vector<std::uint32_t> extra_rows_;
+  Eigen::Matrix3d r_, rt_;  // the current candidate's rotation and its transpose
+  Tally tally_;
 };
 
 }  // namespace
@@ -329,7 +349,7 @@ std::size_t keep_plain_elements_of_lost_rows(MeasurabilityMatrix& m, const Plain
 MeasurabilityMatrix build_measurability(const RoughModel& rough, const OcclusionScene& scene, const SensorModel& sensor,
                                         const ModelSpec& spec, const std::vector<Viewpoint>& candidates,
                                         const MatrixSettings& settings, MatrixStats* stats, const std::atomic<int>* cancel,
-                                        PlainElements* plain) {
+                                        PlainElements* plain, const RowsToTest* only) {
   MeasurabilityMatrix m;
   m.n_rows = static_cast<std::uint32_t>(rough.size());
   m.columns.resize(candidates.size());
@@ -355,10 +375,14 @@ MeasurabilityMatrix build_measurability(const RoughModel& rough, const Occlusion
   Counters cnt;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, candidates.size(), 4), [&](const auto& range) {
     ColumnWorker worker(rough, scene, blocks, lv, eps, plain != nullptr);
-    std::vector<std::uint32_t> column, plain_column;
+    std::vector<std::uint32_t> column, plain_column, rows_to_test;
     for (std::size_t j = range.begin(); j != range.end(); ++j) {
       if (cancel && cancel->load(std::memory_order_relaxed) != 0) return;  // the caller stops planning
-      worker.build(candidates[j], column, plain_column, cnt);
+      if (only) {
+        rows_to_test.clear();
+        (*only)(j, rows_to_test);
+      }
+      worker.build(candidates[j], column, plain_column, cnt, only ? &rows_to_test : nullptr);
       m.columns[j] = MeasurabilityColumn(column, m.n_rows);
       if (plain) plain->matrix.columns[j] = MeasurabilityColumn(plain_column, m.n_rows);
     }

@@ -4,6 +4,7 @@
 // m_ij = 1 when point i lies in viewpoint j's frustum, is visible to both laser and receiver, and its
 // predicted precision (eq. 3.4) and sampling density (eq. 3.8) meet the model specification.
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -112,15 +113,21 @@ struct PlainElements {
   MeasurabilityMatrix matrix;       // filled by build_measurability
 };
 
+/// Per column j, the only rows worth testing (ascending, appended to `rows`); the others are not measurable by
+/// the caller's own knowledge. Called concurrently for different columns.
+using RowsToTest = std::function<void(std::size_t column, std::vector<std::uint32_t>& rows)>;
+
 /// Builds M in parallel over candidates (oneTBB). Rows are visited in the rough model's Morton order, blocks of
 /// rows are culled by bounding sphere, single points by frustum, facing and specification before any ray, and
 /// the surviving pairs' two occlusion rays are streamed through Embree (a near-miss margin's eight more only
 /// for the pairs those two leave clear). Deterministic for any thread count. With `plain`, the plain test's
-/// extra elements too, at the cost of the rays only they need.
+/// extra elements too, at the cost of the rays only they need. With `only`, each column tests just the rows it
+/// names (no block culling; the rest count as culled).
 MeasurabilityMatrix build_measurability(const RoughModel& rough, const OcclusionScene& scene, const SensorModel& sensor,
                                         const ModelSpec& spec, const std::vector<Viewpoint>& candidates,
                                         const MatrixSettings& settings = {}, MatrixStats* stats = nullptr,
-                                        const std::atomic<int>* cancel = nullptr, PlainElements* plain = nullptr);
+                                        const std::atomic<int>* cancel = nullptr, PlainElements* plain = nullptr,
+                                        const RowsToTest* only = nullptr);
 
 /// The free-space margin chooses among the views that can measure a row; it does not give up a row only views
 /// at the edge of the spec reach measure (a bore's wall, seen only at grazing incidence): the rows `m` measures

@@ -161,3 +161,54 @@ TEST(CellViewpoints, TheArmKeepsFreeCandidatesAndStepsBackTheOnesThatWouldHitThe
   }
   EXPECT_GT(stepped, 0u);
 }
+
+namespace {
+
+// A welded 20 mm cube on 8 vertices: each corner's normal is the mean of its three faces (54.7° from each).
+sp::RoughModel welded_cube() {
+  sp::TriangleMesh m;
+  for (int k = 0; k < 8; ++k) m.vertices.emplace_back(k & 1 ? 20.0 : 0.0, k & 2 ? 20.0 : 0.0, k & 4 ? 20.0 : 0.0);
+  m.triangles = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6},   // -z, +z
+                 {0, 1, 4}, {1, 5, 4}, {2, 6, 3}, {3, 6, 7},   // -y, +y
+                 {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};  // -x, +x
+  return sp::make_rough_model(m);
+}
+
+}  // namespace
+
+// A row nothing measures is aimed at square to each face that turns from its normal (face_aims): the cube's
+// top corner gets the three face normals, each aimed inside its own footprint on that face; a threshold above
+// the 54.7° they turn gives none, and a row of a flat patch none either.
+TEST(FaceAims, ACornerIsAimedAtSquareToEachOfItsThreeFaces) {
+  const sp::RoughModel cube = welded_cube();
+  std::uint32_t corner = 0;
+  for (std::uint32_t r = 0; r < cube.size(); ++r)
+    if (cube.points[r].isApprox(Eigen::Vector3d(20, 20, 20))) corner = r;
+  ASSERT_TRUE(cube.points[corner].isApprox(Eigen::Vector3d(20, 20, 20)));
+  ASSERT_NEAR(cube.normals[corner].dot(Eigen::Vector3d::UnitZ()), 1.0 / std::sqrt(3.0), 1e-9);
+  const auto aims = sp::face_aims(cube, {corner}, 20.0 * std::numbers::pi / 180.0, 150.0);
+  ASSERT_EQ(aims.size(), 3u);
+  std::vector<int> axes;
+  for (const auto& a : aims) {
+    EXPECT_EQ(a.row, static_cast<std::int32_t>(corner));
+    EXPECT_DOUBLE_EQ(a.standoff_mm, 150.0);
+    int axis = -1;
+    for (int i = 0; i < 3; ++i)
+      if (std::abs(a.normal[i] - 1.0) < 1e-12) axis = i;
+    ASSERT_GE(axis, 0) << a.normal.transpose();
+    axes.push_back(axis);
+    // On that face (coordinate 20), within its triangle, between the corner and the centroid.
+    EXPECT_NEAR(a.point[axis], 20.0, 1e-9);
+    EXPECT_LT((a.point - cube.points[corner]).norm(), 10.0);
+    EXPECT_GT((a.point - cube.points[corner]).norm(), 4.0);
+  }
+  std::sort(axes.begin(), axes.end());
+  EXPECT_EQ(axes, (std::vector<int>{0, 1, 2}));
+  EXPECT_TRUE(sp::face_aims(cube, {corner}, 60.0 * std::numbers::pi / 180.0, 150.0).empty());
+  const sp::RoughModel patch = sp::make_rough_model(sp::testing::flat_patch(40.0, 4.0));
+  std::uint32_t middle = 0;
+  for (std::uint32_t r = 0; r < patch.size(); ++r)
+    if (patch.points[r].norm() < patch.points[middle].norm()) middle = r;
+  EXPECT_TRUE(sp::face_aims(patch, {middle}, 0.01, 150.0).empty());
+  EXPECT_THROW(sp::face_aims(cube, {8}, 0.3, 150.0), std::out_of_range);
+}

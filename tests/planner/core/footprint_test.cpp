@@ -108,6 +108,42 @@ TEST(FootprintPrediction, ViewsAreCreditedWithTheSamplesTheyMeasureAndFinishRows
   EXPECT_FALSE(std::binary_search(rows_a.begin(), rows_a.end(), row));
 }
 
+// With every row by samples, a single shot tests a sample only against the views that measure its row or a row
+// within two triangles of it (cover_by_samples' `near_on`): the five samples beside their row get the elements
+// the full test gives them, and a sample 40 mm from its row (G sees it, nothing near the row) is left out.
+TEST(FootprintPrediction, WithTheTrianglesASampleIsTestedOnlyByTheViewsOfItsRowsSurroundings) {
+  const Fixture fx;
+  const std::uint32_t row = row_at(fx.rough, {60.0, 0.0, 0.0});
+  const std::vector<Viewpoint> views{above(0.0),  above(60.0), above(59.5 + fx.half_x), above(60.5 + fx.half_x), above(59.5 - fx.half_x),
+                                     above(110.0)};  // G: the plane from x = 74 mm
+  const MeasurabilityMatrix m = build_measurability(fx.rough, fx.scene, fx.sensor, fx.spec, views);
+  const std::vector<double> weight(fx.rough.size(), 1.0);
+  RowFootprints f = five_samples(row, 5);
+  f.points.emplace_back(100.0, 0.0, 0.0);
+  f.normals.emplace_back(Eigen::Vector3d::UnitZ());
+  f.first = {0, 6};
+  const SampleCover full = cover_by_samples(m, weight, f, fx.scene, fx.sensor, fx.spec, views, {}, fx.rough.mean_edge_mm);
+  const SampleCover near =
+      cover_by_samples(m, weight, f, fx.scene, fx.sensor, fx.spec, views, {}, fx.rough.mean_edge_mm, nullptr, nullptr, &fx.rough.triangles);
+  EXPECT_EQ(samples_in(full, 1), (std::vector<std::uint32_t>{0, 1, 2, 3, 4}));
+  // D (from 60.5 mm) misses the row's vertex and measures its neighbour at 64 mm: all its samples are tested.
+  EXPECT_EQ(samples_in(full, 3), (std::vector<std::uint32_t>{3, 4, 5}));
+  EXPECT_EQ(samples_in(full, 5), (std::vector<std::uint32_t>{5}));
+  for (std::uint32_t j = 0; j < 5; ++j) EXPECT_EQ(samples_in(near, j), samples_in(full, j)) << "view " << j;
+  EXPECT_TRUE(samples_in(near, 5).empty());
+  for (std::uint32_t j = 0; j < views.size(); ++j)
+    for (std::uint32_t r = 0; r < fx.rough.size(); ++r) ASSERT_EQ(near.matrix.columns[j].contains(r), full.matrix.columns[j].contains(r));
+  // Triangles that are not the model's are refused by the row they name.
+  std::vector<Triangle> wrong = fx.rough.triangles;
+  wrong[7][1] = m.n_rows + 2;
+  try {
+    cover_by_samples(m, weight, f, fx.scene, fx.sensor, fx.spec, views, {}, fx.rough.mean_edge_mm, nullptr, nullptr, &wrong);
+    ADD_FAILURE() << "triangles past the rows accepted";
+  } catch (const DataError& e) {
+    EXPECT_NE(std::string(e.what()).find("names row " + std::to_string(m.n_rows + 2)), std::string::npos) << e.what();
+  }
+}
+
 TEST(FootprintPrediction, InconsistentFootprintsAreRefusedByWhatIsWrong) {
   const Fixture fx;
   const std::vector<Viewpoint> views{above(0.0)};
