@@ -171,12 +171,12 @@ void print_row(const std::string& object, const Row& r) {
   const bench::CellOracle& c = r.oracle;
   std::printf("%-16s %-20s %6zu %6.3f %4zu/%4zu/%4zu %6zu %6zu %8.4f %8.4f %6.2f %7.1f %10.0f %10.0f  est %.4f  plan_to_99 %zu  "
               "lost: range/incidence %.4f plate %.4f axes %.4f collision %.4f  "
-              "stages s: rough %.2f viewpoints %.2f matrix %.2f cover %.2f  along normals: reach %.3f views %zu/%zu/%zu m_v_rch %.4f ratio %.2f  "
+              "stages s: rough %.2f viewpoints %.2f matrix %.2f (samples %.2f) cover %.2f  along normals: reach %.3f views %zu/%zu/%zu m_v_rch %.4f ratio %.2f  "
               "oracle views to the plan's m_v %zu\n",
               object.c_str(), r.cell_name.c_str(), r.fine_vertices, r.reach, c.views_95, c.views_99, c.views_999, r.candidates,
               r.views, r.cand_reach, r.mv, r.ratio, r.plan_s, r.plan_t, c.cell_time_s, r.est, r.plan99, c.lost_range,
               c.lost_plate, c.lost_axes, c.lost_collision, r.stages.rough_model_s, r.stages.viewpoints_s, r.stages.matrix_s,
-              r.stages.cover_s, r.along_normal.reachable(), r.along_normal.views_95, r.along_normal.views_99,
+              r.stages.matrix_samples_s, r.stages.cover_s, r.along_normal.reachable(), r.along_normal.views_95, r.along_normal.views_99,
               r.along_normal.views_999, r.mv_normal, r.ratio_normal, r.oracle_to_plan);
   std::fflush(stdout);
 }

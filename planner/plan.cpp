@@ -543,6 +543,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     const MeasurabilityMatrix matrix = make_matrix(stage, scene, settings_in.matrix.countermeasures, candidates);
     std::optional<SampleCover> samples;
     if (predicted_by) {
+      const auto t_samples = Clock::now();
       // Every row by samples: each is tested only against the views that measure its row's surroundings (bunny
       // on the turntable, 5k rows: 107 M point tests -> 9 M; 0.8 % of the elements, slivers, lost; docs/quality.md).
       // Crease rows and a replan's rows are tested in full: a few, and a replan's measured neighbours are
@@ -557,6 +558,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
       // box at 600 rows: 0.26 in free space). exact_cover counts overlap in its own rows (crease_samples_apply).
       if (settings.cover.mode == CoverMode::constrained)
         samples->matrix.overlap = overlap_by_footprint_rows(*samples, *predicted_by, row_weight);
+      p.times.matrix_samples_s = seconds_since(t_samples);
     }
     p.candidates = candidates.size();
     p.matrix_density = matrix.density();
@@ -746,6 +748,7 @@ json summary_json(const ViewPlan& p) {
         {"scene", p.times.scene_s},
         {"viewpoints", p.times.viewpoints_s},
         {"matrix", p.times.matrix_s},
+        {"matrix_footprint_samples", p.times.matrix_samples_s},
         {"cover", p.times.cover_s},
         {"total", p.times.total_s()}}},
       {"threads", p.threads}};
@@ -901,6 +904,10 @@ std::string plan_summary(const ViewPlan& p) {
                 p.times.rough_model_s, p.times.scene_s, p.times.viewpoints_s, p.times.matrix_s, p.times.cover_s,
                 p.times.total_s(), p.threads);
   os << buf;
+  if (p.rows_by_footprint_samples > 0) {
+    std::snprintf(buf, sizeof buf, "  of the matrix's %.3f s, %.3f s for the footprint samples\n", p.times.matrix_s, p.times.matrix_samples_s);
+    os << buf;
+  }
   if (p.placement) {
     const PlacementChoice& c = *p.placement;
     os << "placement (" << c.rest.poses.size() << " stable resting poses, centre of mass of the "

@@ -35,6 +35,7 @@ struct ObjectSource {
 
 struct StageTimes {
   double load_s = 0.0, rough_model_s = 0.0, scene_s = 0.0, viewpoints_s = 0.0, matrix_s = 0.0, cover_s = 0.0;
+  double matrix_samples_s = 0.0;  // the footprint samples' part of matrix_s (cover_by_samples)
   double total_s() const { return load_s + rough_model_s + scene_s + viewpoints_s + matrix_s + cover_s; }
 };
 
