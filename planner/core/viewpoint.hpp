@@ -87,7 +87,7 @@ struct ViewpointSettings {
   double cell_oblique_rad = 0.35;
   int cell_standoff_steps = 3;
   /// Rows nothing measures are aimed at along their own normal and, where an adjacent triangle's normal turns
-  /// more than this from it, square to that face too (up to three faces; 0: off). plan.cpp: face_aims.
+  /// more than this from it, square to that face too (up to three faces; 0: off). cell_viewpoints.hpp: face_aims.
   double cell_face_aim_min_angle_rad = 0.0;
 };
 
