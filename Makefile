@@ -17,8 +17,14 @@ deps:
 # CI longer than its 40-minute budget. `make build DEBUG_INFO=-g` for a debugging session.
 DEBUG_INFO ?= -g1
 
+# Unity builds: each library and test binary compiles as batches of 8 files (CMake's UNITY_BUILD), so the headers
+# and the inline templates they share (Eigen, the standard library, GoogleTest, nlohmann-json) are compiled once
+# per batch, not once per file. The optimised build's compile went from 1012 to ~680 CPU-seconds. `make build
+# UNITY=OFF` (or plain cmake) builds file by file, which also checks that each file includes what it uses.
+UNITY ?= ON
+
 build: deps
-	@$(CMAKE) -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O2 $(DEBUG_INFO) -DNDEBUG" > $(BUILD).configure.log 2>&1 || (cat $(BUILD).configure.log; exit 1)
+	@$(CMAKE) -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O2 $(DEBUG_INFO) -DNDEBUG" -DCMAKE_UNITY_BUILD=$(UNITY) > $(BUILD).configure.log 2>&1 || (cat $(BUILD).configure.log; exit 1)
 	@$(CMAKE) --build $(BUILD) -j$(JOBS)
 
 # All tests in the optimised build, then the planner and driver tests again under ASan+UBSan (-O1 keeps it quick;
@@ -32,7 +38,7 @@ kill-test: build
 	tests/daemon/kill_loop.sh $(BUILD) 50
 
 test-asan: deps
-	@$(CMAKE) -S . -B $(ASAN_BUILD) -DCMAKE_BUILD_TYPE=Debug "-DCMAKE_CXX_FLAGS_DEBUG=-O1 $(DEBUG_INFO)" -DSCANCELL_SANITIZE=ON -DSCANCELL_BUILD_BENCH=OFF > $(ASAN_BUILD).configure.log 2>&1 || (cat $(ASAN_BUILD).configure.log; exit 1)
+	@$(CMAKE) -S . -B $(ASAN_BUILD) -DCMAKE_BUILD_TYPE=Debug "-DCMAKE_CXX_FLAGS_DEBUG=-O1 $(DEBUG_INFO)" -DSCANCELL_SANITIZE=ON -DSCANCELL_BUILD_BENCH=OFF -DCMAKE_UNITY_BUILD=$(UNITY) > $(ASAN_BUILD).configure.log 2>&1 || (cat $(ASAN_BUILD).configure.log; exit 1)
 	@$(CMAKE) --build $(ASAN_BUILD) -j$(JOBS) --target planner_tests driver_tests daemon_tests calibration_tests \
 	  genicam_tests fuzz_mesh fuzz_range_image fuzz_plan_file fuzz_config fuzz_control
 	LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp UBSAN_OPTIONS=print_stacktrace=1 \

@@ -14,17 +14,15 @@
 
 namespace scancell::planner {
 
-namespace {
-struct CloudAdaptor {
-  const std::vector<Eigen::Vector3d>* pts;
-  std::size_t kdtree_get_point_count() const { return pts->size(); }
-  double kdtree_get_pt(std::size_t i, std::size_t d) const { return (*pts)[i][static_cast<Eigen::Index>(d)]; }
-  template <class B>
-  bool kdtree_get_bbox(B&) const { return false; }
-};
-}  // namespace
-
 struct ModelCloud::Data {
+  // nanoflann's view of `points` (a member type, not the anonymous namespace: a unity build includes this file).
+  struct CloudAdaptor {
+    const std::vector<Eigen::Vector3d>* pts;
+    std::size_t kdtree_get_point_count() const { return pts->size(); }
+    double kdtree_get_pt(std::size_t i, std::size_t d) const { return (*pts)[i][static_cast<Eigen::Index>(d)]; }
+    template <class B>
+    bool kdtree_get_bbox(B&) const { return false; }
+  };
   std::vector<Eigen::Vector3d> points, normals;
   CloudAdaptor adaptor{&points};
   nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, CloudAdaptor>, CloudAdaptor, 3> index;

@@ -1,11 +1,14 @@
 #pragma once
 // Synthetic geometry with known answers for the planner tests, and the shipped configs.
+#include <numbers>
 #include <string>
 
 #include "planner/config.hpp"
 #include "planner/geometry/mesh.hpp"
 
 namespace scancell::planner::testing {
+
+inline constexpr double kDeg = std::numbers::pi / 180.0;  // rad per degree
 
 inline std::string source_path(const std::string& rel) { return std::string(SCANCELL_SOURCE_DIR) + "/" + rel; }
 

@@ -11,7 +11,7 @@
 namespace scancell::planner {
 namespace {
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using testing::kDeg;
 
 TEST(SensorModel, PrecisionAtMinimumRangeIsTenMicrons) {
   const SensorModel s = testing::thesis_sensor();

@@ -14,7 +14,7 @@ namespace scancell::planner {
 namespace {
 
 using ::testing::HasSubstr;
-constexpr double kDeg = std::numbers::pi / 180.0;
+using testing::kDeg;
 
 /// The image of a view from `from` looking at `at` (object frame), scan length 80 mm, with sensor noise.
 RangeImage scan_image(const TriangleMesh& m, const Eigen::Vector3d& at, const Eigen::Vector3d& from) {

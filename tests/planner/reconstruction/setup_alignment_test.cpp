@@ -15,7 +15,7 @@ namespace scancell::planner {
 namespace {
 
 using ::testing::HasSubstr;
-constexpr double kDeg = std::numbers::pi / 180.0;
+using testing::kDeg;
 
 /// A part measured in two setups: setup 1 rested on its -z side (its model sees every face not facing down),
 /// setup 2 on its +z side (its exploration sees every face not facing up), sampled apart.
