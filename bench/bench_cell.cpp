@@ -95,6 +95,7 @@ struct Row {
   std::string cell_name;
   std::size_t fine_vertices = 0, candidates = 0, views = 0, plan99 = 0;
   double reach = 0.0, cand_reach = 0.0, mv = 0.0, ratio = 0.0, plan_s = 0.0, plan_t = 0.0, est = 0.0;
+  std::size_t rows_unmeasurable = 0, self_aims = 0, self_closed = 0, self_candidates = 0;  // rows no first candidate measured; their aims, closed aims, views
   sp::StageTimes stages;  // the plan's own stage times (plan_s is their sum and what lies between)
   bench::CellOracle oracle, along_normal;  // in the cell's own space; along the normals alone
   double mv_normal = 0.0, ratio_normal = 0.0;  // the plan against `along_normal`
@@ -136,6 +137,10 @@ Row judge(const sp::TriangleMesh& fine_mesh, const std::optional<sp::CellModel>&
   const sp::ViewPlan plan = sp::plan_views(fine_mesh, sensor, spec, as_planned, ro, n_threads, cell ? &*cell : nullptr);
   row.plan_s = scancell::seconds_since(t0);
   row.stages = plan.times;
+  row.rows_unmeasurable = plan.generation.rows_unmeasurable_before;
+  row.self_aims = plan.cell_generation.self_aims;
+  row.self_closed = plan.cell_generation.self_aims_closed;
+  row.self_candidates = plan.cell_generation.self_candidates;
   // The fine mesh's rows, in the plan's object frame, with the plate.
   const sp::RoughModel fine = scancell::bench::judge_model(fine_mesh);
   sp::TriangleMesh scene_mesh = fine_mesh;
@@ -172,12 +177,12 @@ void print_row(const std::string& object, const Row& r) {
   std::printf("%-16s %-20s %6zu %6.3f %4zu/%4zu/%4zu %6zu %6zu %8.4f %8.4f %6.2f %7.1f %10.0f %10.0f  est %.4f  plan_to_99 %zu  "
               "lost: range/incidence %.4f plate %.4f axes %.4f collision %.4f  "
               "stages s: rough %.2f viewpoints %.2f matrix %.2f (samples %.2f) cover %.2f  along normals: reach %.3f views %zu/%zu/%zu m_v_rch %.4f ratio %.2f  "
-              "oracle views to the plan's m_v %zu\n",
+              "oracle views to the plan's m_v %zu  rows nothing measured first %zu, aims %zu (and %zu closed), views %zu\n",
               object.c_str(), r.cell_name.c_str(), r.fine_vertices, r.reach, c.views_95, c.views_99, c.views_999, r.candidates,
               r.views, r.cand_reach, r.mv, r.ratio, r.plan_s, r.plan_t, c.cell_time_s, r.est, r.plan99, c.lost_range,
               c.lost_plate, c.lost_axes, c.lost_collision, r.stages.rough_model_s, r.stages.viewpoints_s, r.stages.matrix_s,
               r.stages.matrix_samples_s, r.stages.cover_s, r.along_normal.reachable(), r.along_normal.views_95, r.along_normal.views_99,
-              r.along_normal.views_999, r.mv_normal, r.ratio_normal, r.oracle_to_plan);
+              r.along_normal.views_999, r.mv_normal, r.ratio_normal, r.oracle_to_plan, r.rows_unmeasurable, r.self_aims, r.self_closed, r.self_candidates);
   std::fflush(stdout);
 }
 

@@ -8,6 +8,8 @@
 #include <stdexcept>
 #include <string>
 
+#include <Eigen/Geometry>
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 namespace scancell::planner {
@@ -278,6 +280,39 @@ std::vector<Viewpoint> cell_viewpoints_at(const std::vector<AimPoint>& aims, con
   }
   rep.candidates = out.size();
   if (report) *report = rep;
+  return out;
+}
+
+std::vector<AimPoint> aims_open_to_sensor(const std::vector<AimPoint>& aims, const OcclusionScene& scene, const SensorModel& sensor,
+                                          double ray_offset_mm, int probes, std::size_t* closed) {
+  if (probes < 1) throw std::invalid_argument("aims_open_to_sensor: probes " + std::to_string(probes) + " (want at least 1)");
+  const double cap = std::atan(std::hypot(std::tan(sensor.grazing_xz_rad), std::tan(sensor.grazing_yz_rad)));
+  const std::vector<Eigen::Vector3d> local = cap_directions(std::min(cap, 0.5 * std::numbers::pi), probes);
+  std::vector<std::uint8_t> open(aims.size(), 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, aims.size(), 16), [&](const auto& range) {
+    for (std::size_t k = range.begin(); k != range.end(); ++k) {
+      if (!(aims[k].normal.squaredNorm() > 1e-12)) {  // no normal to probe around: kept, not judged
+        open[k] = 1;
+        continue;
+      }
+      const Eigen::Vector3d n = aims[k].normal.normalized();
+      const Eigen::Quaterniond to_n = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), n);
+      OcclusionRay ray;
+      ray.origin = (aims[k].point + ray_offset_mm * n).cast<float>();
+      ray.t_far = static_cast<float>(sensor.range_min_mm);
+      for (const auto& l : local) {
+        ray.dir = (to_n * l).cast<float>();
+        if (!scene.occluded1(ray)) {
+          open[k] = 1;
+          break;
+        }
+      }
+    }
+  });
+  std::vector<AimPoint> out;
+  for (std::size_t k = 0; k < aims.size(); ++k)
+    if (open[k]) out.push_back(aims[k]);
+  if (closed) *closed = aims.size() - out.size();
   return out;
 }
 

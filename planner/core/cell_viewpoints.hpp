@@ -40,7 +40,9 @@ struct CellGenerationReport {
   std::size_t unreachable = 0;   // no twist sign the axes reach
   std::size_t colliding = 0;     // collides at every stand-off tried
   std::size_t footprint_aims = 0, footprint_candidates = 0;  // replans: points aimed at what open rows lack, views kept
+  std::size_t footprint_aims_closed = 0;  // replans: of those points, closed to every view within R_min, dropped
   std::size_t self_aims = 0, self_candidates = 0;  // rows no candidate measured, aimed at themselves; views kept
+  std::size_t self_aims_closed = 0;  // of those aims, closed to every view within R_min (aims_open_to_sensor), dropped
 };
 
 /// A surface point to aim views at: where (object frame, mm), its outward unit normal, the stand-off to start
@@ -69,6 +71,15 @@ std::vector<Viewpoint> cell_viewpoints(const RoughModel& rough, const std::vecto
 std::vector<Viewpoint> cell_viewpoints_at(const std::vector<AimPoint>& aims, const SensorModel& sensor, const ModelSpec& spec,
                                           const ViewpointSettings& settings, const CellModel& cell,
                                           const CollisionChecker& checker, CellGenerationReport* report = nullptr);
+
+/// The aims some view could see at all, in order: those with a direction within the sensor's widest incidence of
+/// their normal (both grazing limits at once, atan √(tan² t_xz + tan² t_yz), eq. 3.4's domain) that nothing in
+/// `scene` blocks out to R_min, probed with `probes` rays from `ray_offset_mm` off the surface. Every view's
+/// laser sits at least R_min from what it measures, so an aim closed so near (a face resting on the plate, the
+/// floor of a slot narrower than the cap) gets no view: its five views would only be tested and measure nothing.
+/// An aim without a normal is kept. `closed` counts the aims dropped. Deterministic; parallel over the aims.
+std::vector<AimPoint> aims_open_to_sensor(const std::vector<AimPoint>& aims, const OcclusionScene& scene, const SensorModel& sensor,
+                                          double ray_offset_mm, int probes = 128, std::size_t* closed = nullptr);
 
 /// Aims square to the faces of `rows` (viewpoints.cell_face_aim_min_angle_rad): per row, each adjacent triangle
 /// whose normal turns more than `min_angle_rad` from the row's normal and from the faces already kept (at most

@@ -37,10 +37,6 @@ std::vector<Block> make_blocks(const RoughModel& rough) {
   return blocks;
 }
 
-double ray_offset(const RoughModel& rough, const MatrixSettings& st) {
-  return st.ray_offset_mm > 0.0 ? st.ray_offset_mm : 0.01 * rough.mean_edge_mm;
-}
-
 /// Conservative: false only when no point of the sphere can be inside the frustum.
 bool sphere_may_touch_frustum(const SensorModel& s, const FrustumTerms& f, double scan_length_mm, const Eigen::Vector3d& c,
                               double r) {
@@ -118,6 +114,10 @@ struct Counters {
 };
 
 }  // namespace
+
+double ray_offset_mm(const RoughModel& rough, const MatrixSettings& st) {
+  return st.ray_offset_mm > 0.0 ? st.ray_offset_mm : 0.01 * rough.mean_edge_mm;
+}
 
 SensorModel detuned_sensor(const SensorModel& sensor, const Countermeasures& c) {
   SensorModel s = sensor;
@@ -354,7 +354,7 @@ MeasurabilityMatrix build_measurability(const RoughModel& rough, const Occlusion
   m.n_rows = static_cast<std::uint32_t>(rough.size());
   m.columns.resize(candidates.size());
   const auto blocks = make_blocks(rough);
-  const double eps = ray_offset(rough, settings);
+  const double eps = ray_offset_mm(rough, settings);
   // Two levels of the same test: `tight` makes the matrix; `wide` is the plain one whose elements the caller
   // also wants, or (without) the tight one with its undisplaced rays only. Every level's countermeasures are
   // at least the wide one's, so a tight element is always a wide one: blocks are culled and rays cast at the
@@ -402,7 +402,7 @@ MeasurabilityMatrix build_measurability_naive(const RoughModel& rough, const Occ
   MeasurabilityMatrix m;
   m.n_rows = static_cast<std::uint32_t>(rough.size());
   m.columns.resize(candidates.size());
-  const double eps = ray_offset(rough, settings);
+  const double eps = ray_offset_mm(rough, settings);
   const FrustumTerms terms(sensor);
   Counters cnt;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, candidates.size(), 1), [&](const auto& range) {
@@ -446,7 +446,7 @@ bool measurable(const RoughModel& rough, const OcclusionScene& scene, const Sens
       test_point(sensor, spec, v.scan_length_mm, r.transpose() * (rough.points[row] - v.position), r.transpose() * rough.normals[row]);
   if (!t.compliant) return false;
   OcclusionRay rays[2];
-  (void)pair_rays(rough.points[row], rough.normals[row], v, r, t, ray_offset(rough, settings), 0.0, rays);
+  (void)pair_rays(rough.points[row], rough.normals[row], v, r, t, ray_offset_mm(rough, settings), 0.0, rays);
   std::uint8_t occ[2];
   scene.occluded(rays, 2, occ);
   return !occ[0] && !occ[1];

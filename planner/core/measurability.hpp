@@ -106,6 +106,9 @@ struct MatrixSettings {
   Countermeasures countermeasures;  // none by default
 };
 
+/// The occlusion rays' offset off the surface `st` gives for `rough` (MatrixSettings::ray_offset_mm), in mm.
+double ray_offset_mm(const RoughModel& rough, const MatrixSettings& st);
+
 /// The elements a plainer test gives (e.g. without the free-space margin), built in the same pass as the matrix:
 /// `matrix` holds, per column, the rows the plain test measures and the matrix's test does not.
 struct PlainElements {

@@ -340,18 +340,6 @@ std::vector<std::uint32_t> spread_targets(const RoughModel& rough, const SensorM
   return targets;
 }
 
-/// Probe directions: a Fibonacci spiral of `count` on the cap of half-angle `cap` around +Z.
-std::vector<Eigen::Vector3d> cap_probes(double cap, int count) {
-  std::vector<Eigen::Vector3d> local;
-  for (int i = 0; i < count; ++i) {
-    const double cz = 1.0 - (1.0 - std::cos(cap)) * (i + 0.5) / count;
-    const double sz = std::sqrt(std::max(0.0, 1.0 - cz * cz));
-    const double az = i * std::numbers::pi * (3.0 - std::sqrt(5.0));
-    local.emplace_back(sz * std::cos(az), sz * std::sin(az), cz);
-  }
-  return local;
-}
-
 /// A spread subset of `open` of at most `count`: start nearest the normal `n`, then farthest-first on the sphere.
 std::vector<Eigen::Vector3d> spread_directions(const std::vector<Eigen::Vector3d>& open, const Eigen::Vector3d& n, int count) {
   std::vector<Eigen::Vector3d> keep;
@@ -375,6 +363,17 @@ std::vector<Eigen::Vector3d> spread_directions(const std::vector<Eigen::Vector3d
 
 }  // namespace
 
+std::vector<Eigen::Vector3d> cap_directions(double cap_rad, int count) {
+  std::vector<Eigen::Vector3d> local;
+  for (int i = 0; i < count; ++i) {
+    const double cz = 1.0 - (1.0 - std::cos(cap_rad)) * (i + 0.5) / count;
+    const double sz = std::sqrt(std::max(0.0, 1.0 - cz * cz));
+    const double az = i * std::numbers::pi * (3.0 - std::sqrt(5.0));
+    local.emplace_back(sz * std::cos(az), sz * std::sin(az), cz);
+  }
+  return local;
+}
+
 std::vector<Viewpoint> open_direction_viewpoints(const RoughModel& rough, const OcclusionScene& scene,
                                                  const SensorModel& sensor, const ModelSpec& spec,
                                                  const ViewpointSettings& st, const std::vector<std::uint32_t>& rows,
@@ -391,7 +390,7 @@ std::vector<Viewpoint> open_direction_viewpoints(const RoughModel& rough, const 
   const double r_far = std::max(r_near, std::min(sensor.range_max_mm, max_range_for_precision_mm(sensor, spec)) * 0.8);
   const int levels = std::max(1, st.open_direction_standoffs);
   // Probe directions within the stricter grazing limit of the normal.
-  const std::vector<Eigen::Vector3d> local = cap_probes(0.9 * std::min(sensor.grazing_xz_rad, sensor.grazing_yz_rad), 96);
+  const std::vector<Eigen::Vector3d> local = cap_directions(0.9 * std::min(sensor.grazing_xz_rad, sensor.grazing_yz_rad), 96);
   const double eps = 0.01 * rough.mean_edge_mm + 1e-3;
 
   std::vector<std::vector<Viewpoint>> per_row(targets.size());

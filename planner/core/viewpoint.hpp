@@ -119,6 +119,9 @@ std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const Occlus
                                            const SensorModel& sensor, const ModelSpec& spec,
                                            const ViewpointSettings& settings, GenerationReport* report = nullptr);
 
+/// `count` unit directions spread evenly (a Fibonacci spiral) over the cap of half-angle `cap_rad` around +Z.
+std::vector<Eigen::Vector3d> cap_directions(double cap_rad, int count);
+
 /// Open-direction viewpoints for `rows` (typically those no ordinary candidate measures): for each targeted
 /// row (farthest-point sampled, at most `max_rows`), directions within the grazing limits of its normal are
 /// probed with rays; the open ones (nothing hit out to the precision-limited range) are thinned to

@@ -506,7 +506,13 @@ TEST(Plan, RowsNothingMeasuresGetTheCellsViewsAimedAtThemselves) {
     for (auto r : left) EXPECT_LT(p.rough.points[r].z(), 1e-6) << "row " << r << " at " << p.rough.points[r].transpose();
     EXPECT_LE(left.size(), on_plate);
     EXPECT_GT(p.generation.rows_unmeasurable_before, 3 * on_plate);  // the sparse aims alone left most of the box
-    EXPECT_EQ(p.cell_generation.self_aims, p.generation.rows_unmeasurable_before);
+    // Every row nothing measured is aimed at, but those on the bottom face (normal straight down into the plate)
+    // are closed to every view and dropped; the rim's rows, their normals half down and half out, are not.
+    EXPECT_EQ(p.cell_generation.self_aims + p.cell_generation.self_aims_closed, p.generation.rows_unmeasurable_before);
+    std::size_t facing_plate = 0;
+    for (std::uint32_t r = 0; r < p.rough.size(); ++r) facing_plate += p.rough.points[r].z() < 1e-6 && p.rough.normals[r].z() < -0.99;
+    EXPECT_GT(facing_plate, 0u);
+    EXPECT_EQ(p.cell_generation.self_aims_closed, facing_plate);
     EXPECT_GT(p.cell_generation.self_candidates, p.cell_generation.candidates);
     // The plan measures every side and the top: each row above the plate predicted.
     const std::set<std::uint32_t> predicted(p.predicted_rows.begin(), p.predicted_rows.end());

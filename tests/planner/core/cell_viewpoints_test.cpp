@@ -212,3 +212,37 @@ TEST(FaceAims, ACornerIsAimedAtSquareToEachOfItsThreeFaces) {
   EXPECT_TRUE(sp::face_aims(patch, {middle}, 0.01, 150.0).empty());
   EXPECT_THROW(sp::face_aims(cube, {8}, 0.3, 150.0), std::out_of_range);
 }
+
+// A view's laser stands at least R_min from what it measures, within the widest incidence of the normal
+// (atan √(tan² 70° + tan² 60°) = 72.9° for the thesis sensor): an aim blocked that near in every such
+// direction gets no view (aims_open_to_sensor).
+TEST(OpenAims, AFaceOnThePlateAndASlotFloorAreClosedTheRestOpen) {
+  const BoxOnPlate b;
+  const sp::OcclusionScene on_plate(sp::with_fixtures(b.rough.mesh(), b.cell));
+  const Eigen::Vector3d X = Eigen::Vector3d::UnitX(), Z = Eigen::Vector3d::UnitZ();
+  const std::vector<sp::AimPoint> aims{{{0, 0, 60}, Z, 150, 0},    // the top
+                                       {{0, 0, 0}, -Z, 150, 1},    // the face resting on the plate
+                                       {{50, 0, 1}, X, 150, 2},    // a wall's foot: the plate blocks half its cap
+                                       {{-20, 10, 0}, -Z, 150, 3}};
+  std::size_t closed = 0;
+  const auto open = sp::aims_open_to_sensor(aims, on_plate, b.sensor, 0.01, 128, &closed);
+  ASSERT_EQ(open.size(), 2u);
+  EXPECT_EQ(open[0].row, 0);  // in order
+  EXPECT_EQ(open[1].row, 2);
+  EXPECT_EQ(closed, 2u);
+  // A slot 6 mm wide and 100 mm deep: its floor is open only within 2° of straight up, where neither the laser
+  // nor the receiver, 24° apart at least (atan(b / R_max)), can both pass; a pocket 60 mm wide and 20 mm deep is open.
+  const sp::OcclusionScene slot(sp::testing::square_cavity(6, 100, 40, 2));
+  const sp::OcclusionScene pocket(sp::testing::square_cavity(60, 20, 80, 5));
+  const std::vector<sp::AimPoint> floor{{{0, 0, -100}, Z, 150, 7}};
+  const std::vector<sp::AimPoint> pocket_floor{{{0, 0, -20}, Z, 150, 8}};
+  EXPECT_TRUE(sp::aims_open_to_sensor(floor, slot, b.sensor, 0.01).empty());
+  EXPECT_EQ(sp::aims_open_to_sensor(pocket_floor, pocket, b.sensor, 0.01).size(), 1u);
+  // The probes stop at R_min: with R_min 10 mm the slot's floor is open (its walls lie 40 mm along the steepest probe).
+  sp::SensorModel near = b.sensor;
+  near.range_min_mm = 10.0;
+  EXPECT_EQ(sp::aims_open_to_sensor(floor, slot, near, 0.01).size(), 1u);
+  const std::vector<sp::AimPoint> no_normal{{{0, 0, 0}, Eigen::Vector3d::Zero(), 150, 9}};
+  EXPECT_EQ(sp::aims_open_to_sensor(no_normal, on_plate, b.sensor, 0.01).size(), 1u);  // not judged, kept
+  EXPECT_THROW(sp::aims_open_to_sensor(aims, on_plate, b.sensor, 0.01, 0), std::invalid_argument);
+}
