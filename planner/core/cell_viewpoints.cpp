@@ -284,7 +284,7 @@ std::vector<Viewpoint> cell_viewpoints_at(const std::vector<AimPoint>& aims, con
 }
 
 std::vector<AimPoint> aims_open_to_sensor(const std::vector<AimPoint>& aims, const OcclusionScene& scene, const SensorModel& sensor,
-                                          double ray_offset_mm, int probes, std::size_t* closed) {
+                                          double ray_offset_mm, std::size_t* closed, int probes) {
   if (probes < 1) throw std::invalid_argument("aims_open_to_sensor: probes " + std::to_string(probes) + " (want at least 1)");
   const double cap = std::atan(std::hypot(std::tan(sensor.grazing_xz_rad), std::tan(sensor.grazing_yz_rad)));
   const std::vector<Eigen::Vector3d> local = cap_directions(std::min(cap, 0.5 * std::numbers::pi), probes);

@@ -79,7 +79,7 @@ std::vector<Viewpoint> cell_viewpoints_at(const std::vector<AimPoint>& aims, con
 /// floor of a slot narrower than the cap) gets no view: its five views would only be tested and measure nothing.
 /// An aim without a normal is kept. `closed` counts the aims dropped. Deterministic; parallel over the aims.
 std::vector<AimPoint> aims_open_to_sensor(const std::vector<AimPoint>& aims, const OcclusionScene& scene, const SensorModel& sensor,
-                                          double ray_offset_mm, int probes = 128, std::size_t* closed = nullptr);
+                                          double ray_offset_mm, std::size_t* closed = nullptr, int probes = 128);
 
 /// Aims square to the faces of `rows` (viewpoints.cell_face_aim_min_angle_rad): per row, each adjacent triangle
 /// whose normal turns more than `min_angle_rad` from the row's normal and from the faces already kept (at most

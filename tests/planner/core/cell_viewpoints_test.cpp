@@ -225,7 +225,7 @@ TEST(OpenAims, AFaceOnThePlateAndASlotFloorAreClosedTheRestOpen) {
                                        {{50, 0, 1}, X, 150, 2},    // a wall's foot: the plate blocks half its cap
                                        {{-20, 10, 0}, -Z, 150, 3}};
   std::size_t closed = 0;
-  const auto open = sp::aims_open_to_sensor(aims, on_plate, b.sensor, 0.01, 128, &closed);
+  const auto open = sp::aims_open_to_sensor(aims, on_plate, b.sensor, 0.01, &closed);
   ASSERT_EQ(open.size(), 2u);
   EXPECT_EQ(open[0].row, 0);  // in order
   EXPECT_EQ(open[1].row, 2);
@@ -244,5 +244,5 @@ TEST(OpenAims, AFaceOnThePlateAndASlotFloorAreClosedTheRestOpen) {
   EXPECT_EQ(sp::aims_open_to_sensor(floor, slot, near, 0.01).size(), 1u);
   const std::vector<sp::AimPoint> no_normal{{{0, 0, 0}, Eigen::Vector3d::Zero(), 150, 9}};
   EXPECT_EQ(sp::aims_open_to_sensor(no_normal, on_plate, b.sensor, 0.01).size(), 1u);  // not judged, kept
-  EXPECT_THROW(sp::aims_open_to_sensor(aims, on_plate, b.sensor, 0.01, 0), std::invalid_argument);
+  EXPECT_THROW(sp::aims_open_to_sensor(aims, on_plate, b.sensor, 0.01, nullptr, 0), std::invalid_argument);
 }
