@@ -57,8 +57,10 @@ void JobRunner::execute_view(Job& j, std::int64_t plan, const ViewRecord& v, con
   std::string note, registration;
   trace_.mark("registering");  // the sweep is over: from here to "stored" the view exists only in memory
   if (j.cloud) {
-    // Rotations about each profile's laser origin: a camera orientation error shears a line scan.
-    const sp::IcpResult r = sp::register_scan(sp::scan_samples(img), *j.cloud, settings_.icp);
+    // Rotations about each profile's laser origin: a camera orientation error shears a line scan. A fused
+    // rough model is off by up to its voxel: what a view's shape fixes only weakly is left as positioned.
+    const sp::IcpOptions icp = j.request.bbox_mm ? sp::for_model_error(settings_.icp, settings_.rough_scan.fusion.voxel_mm) : settings_.icp;
+    const sp::IcpResult r = sp::register_scan(sp::scan_samples(img), *j.cloud, icp);
     if (r.ok) {
       // Against a fused rough model the correction is partly the model's own error: believe it as far as
       // the positioner is less certain than the model.

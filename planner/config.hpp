@@ -47,12 +47,20 @@ struct PlannerSettings {
   /// of by its vertex; 0: by the vertex (thesis 3.3). A row whose footprint reaches past what a view sees (a
   /// rim by the plate, the side of a cleft) is then known before a view is spent on it, which is what the
   /// cell oracle, aiming at fine vertices, knows (docs/quality.md: on the turntable cell knot1's single shot
-  /// measures 0.9777 of the reach in 149 views by the vertex, 0.9880 in 175 by 8 samples; plans 3-4× slower).
+  /// measures 0.9777 of the reach in 149 views by the vertex, 0.9880 in 175 by 8 samples). 0 here, 4 in
+  /// config/planner/default.yaml (session 36).
   int cell_footprint_samples = 0;
+  /// matrix.cell_footprint_sample_area_mm2: with cell_footprint_samples, one sample per this much of a row's
+  /// area, up to that many; a row under two samples' worth is predicted by its vertex (a crease row by
+  /// crease_footprint_samples still). A vertex mispredicts a band about as wide as its row, so rows already
+  /// that fine gain nothing from samples, and a mesh planned as given pays for them per row (docs/quality.md:
+  /// 26k rows on the turntable 15.7 s with 4 each, 9.1 s at 4 mm²). 0 here: every row cell_footprint_samples;
+  /// 4 in config/planner/default.yaml (session 36).
+  double cell_footprint_sample_area_mm2 = 0.0;
   /// matrix.crease_footprint_samples / crease_angle_rad: a plan that is not a replan predicts the rows on a
   /// crease (crease_rows: a triangle more than crease_angle_rad from the row's normal) by up to this many
   /// footprint samples, each with its own triangle's normal (in free space and, when cell_footprint_samples
-  /// is 0, on a cell); 0: by the vertex. A crease row's bisector normal (a box's edge, a hole's rim, a
+  /// is 0 or leaves the row to its vertex, on a cell); 0: by the vertex. A crease row's bisector normal (a box's edge, a hole's rim, a
   /// pocket's floor by its wall) faces no surface that is there: views that measure both faces fail it, and
   /// the cover spent views on those rows alone (docs/quality.md: the box with a blind hole 39 views, 1.44×
   /// the cell oracle; by 4 samples 30). 0 here, 4 in config/planner/default.yaml. Under the registration

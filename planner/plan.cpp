@@ -507,17 +507,23 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     }
     const std::vector<double> row_weight = row_weights(p.rough, measured_rows, row_weight_scale);
     // The rows predicted by footprint samples: a replan's open rows, by what they lack (the caller's measured
-    // coverage); or, in a single shot on a cell, every row by its whole footprint when
-    // matrix.cell_footprint_samples says so; else the rows on a crease (matrix.crease_footprint_samples,
+    // coverage); or, in a single shot on a cell when matrix.cell_footprint_samples says so, every row by its
+    // whole footprint, but for rows under two samples' worth of area (matrix.cell_footprint_sample_area_mm2),
+    // left to their vertex unless on a crease; else the rows on a crease (matrix.crease_footprint_samples,
     // crease_samples_apply). Only a replan's also get candidates aimed at them (the stage's `footprints`): for
     // every row of a single shot those are five more per row, and 13-14 s more of plan for 5k rows
     // (docs/quality.md).
     RowFootprints whole;
     const RowFootprints* predicted_by = footprints;
-    bool every_row = false;  // `whole` holds every row's footprint
+    bool every_row = false;  // `whole` is a single shot's on a cell: rows `matrix` is built for in full
     if (!footprints && !measured_rows) {
       if (p.cell && settings.cell_footprint_samples > 0) {
-        whole = whole_row_footprints(p.rough, spec, static_cast<std::size_t>(settings.cell_footprint_samples));
+        WholeRowSampling sampling{static_cast<std::size_t>(settings.cell_footprint_samples), settings.cell_footprint_sample_area_mm2, {}, 0};
+        if (settings.cell_footprint_sample_area_mm2 > 0.0 && crease_samples_apply(settings)) {
+          sampling.crease = crease_rows(p.rough, settings.crease_angle_rad);
+          sampling.crease_samples = static_cast<std::size_t>(settings.crease_footprint_samples);
+        }
+        whole = whole_row_footprints(p.rough, spec, sampling);
         every_row = true;
       } else if (crease_samples_apply(settings)) {
         whole = MeasuredCoverage(p.rough, spec)
@@ -645,6 +651,7 @@ json settings_json(const ViewPlan& p) {
                 {"local_search_stall_work", p.settings.cover.local_search_stall_work},
                 {"local_search_time_limit_s", p.settings.cover.local_search_time_limit_s}}},
               {"matrix", {{"ray_offset_mm", p.settings.matrix.ray_offset_mm}, {"cell_footprint_samples", p.settings.cell_footprint_samples},
+                          {"cell_footprint_sample_area_mm2", p.settings.cell_footprint_sample_area_mm2},
                           {"crease_footprint_samples", p.settings.crease_footprint_samples},
                           {"crease_angle_rad", p.settings.crease_angle_rad}}}};
   {

@@ -185,12 +185,21 @@ std::size_t MeasuredCoverage::add(const RangeImage& img, const std::vector<std::
 
 RowFootprints MeasuredCoverage::open_footprints(const std::vector<std::uint32_t>& rows, std::size_t max_samples) const {
   if (max_samples == 0) throw ConfigError("open_footprints: max_samples must be at least 1");
-  RowFootprints f;
   std::vector<std::uint32_t> sorted = rows;
   std::sort(sorted.begin(), sorted.end());
   sorted.erase(std::unique(sorted.begin(), sorted.end()), sorted.end());
-  for (const auto r : sorted) {
+  return open_footprints(sorted, std::vector<std::size_t>(sorted.size(), max_samples));
+}
+
+RowFootprints MeasuredCoverage::open_footprints(const std::vector<std::uint32_t>& rows, const std::vector<std::size_t>& max_samples) const {
+  if (max_samples.size() != rows.size())
+    throw DataError("open_footprints: " + std::to_string(max_samples.size()) + " sample caps for " + std::to_string(rows.size()) + " rows");
+  RowFootprints f;
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const std::uint32_t r = rows[i];
     if (r >= this->rows()) throw DataError("open_footprints: row " + std::to_string(r) + " past the " + std::to_string(this->rows()) + " rows");
+    if (i > 0 && r <= rows[i - 1]) throw DataError("open_footprints: row " + std::to_string(r) + " after row " + std::to_string(rows[i - 1]) + " (ascending, no repeats)");
+    if (max_samples[i] == 0) throw ConfigError("open_footprints: row " + std::to_string(r) + " capped at 0 samples (at least 1)");
     const std::size_t cells = footprint_[r].size();
     if (measured(r)) continue;
     const auto need = static_cast<std::size_t>(std::ceil(options_.row_fraction * static_cast<double>(cells) - 1e-9));
@@ -199,7 +208,7 @@ RowFootprints MeasuredCoverage::open_footprints(const std::vector<std::uint32_t>
       if (!filled_[r][c]) open.push_back(c);
     // At most max_samples of the unfilled cells, evenly through them (keys are row-major in the tangent
     // plane, so every part of the gap is sampled); a view must measure the share of them the row lacks.
-    const std::size_t k = std::min(open.size(), max_samples);
+    const std::size_t k = std::min(open.size(), max_samples[i]);
     for (std::size_t s = 0; s < k; ++s) {
       const std::size_t c = open[(2 * s + 1) * open.size() / (2 * k)];
       f.points.push_back(cell_point_[r][c].cast<double>());
@@ -237,11 +246,26 @@ double MeasuredCoverage::coverage() const {
   return total_area_ > 0.0 ? a / total_area_ : 0.0;
 }
 
-RowFootprints whole_row_footprints(const RoughModel& rough, const ModelSpec& spec, std::size_t max_samples, CoverageOptions options) {
+RowFootprints whole_row_footprints(const RoughModel& rough, const ModelSpec& spec, const WholeRowSampling& s, CoverageOptions options) {
+  if (s.max_samples == 0) throw ConfigError("whole_row_footprints: max_samples must be at least 1");
+  if (!(s.sample_area_mm2 >= 0.0)) throw ConfigError("whole_row_footprints: sample_area_mm2 must be >= 0, got " + std::to_string(s.sample_area_mm2));
   const MeasuredCoverage coverage(rough, spec, options);
-  std::vector<std::uint32_t> all(rough.size());
-  for (std::uint32_t r = 0; r < all.size(); ++r) all[r] = r;
-  return coverage.open_footprints(all, max_samples);
+  std::vector<std::uint32_t> rows;
+  std::vector<std::size_t> caps;
+  std::size_t next_crease = 0;
+  for (std::uint32_t r = 0; r < rough.size(); ++r) {
+    // Sampled finer than the rough model is already, a row adds no resolution its vertex lacks: the band a
+    // vertex mispredicts, by a plate's rim or a cleft's wall, is as wide as its row (docs/quality.md).
+    std::size_t k = s.max_samples;
+    if (s.sample_area_mm2 > 0.0) k = std::min(k, static_cast<std::size_t>(std::floor(rough.area_mm2[r] / s.sample_area_mm2)));
+    while (next_crease < s.crease.size() && s.crease[next_crease] < r) ++next_crease;
+    const bool crease = s.crease_samples > 0 && next_crease < s.crease.size() && s.crease[next_crease] == r;
+    if (crease) k = std::max(k, s.crease_samples);
+    if (k < (crease ? 1u : 2u)) continue;
+    rows.push_back(r);
+    caps.push_back(k);
+  }
+  return coverage.open_footprints(rows, caps);
 }
 
 }  // namespace scancell::planner

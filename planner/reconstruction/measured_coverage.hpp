@@ -49,6 +49,8 @@ class MeasuredCoverage {
   /// cell centre on the rough-model triangle it came from with that triangle's normal, and how many of them one
   /// view must measure to bring the row to `row_fraction` (the share it lacks of its unfilled cells, rounded up).
   RowFootprints open_footprints(const std::vector<std::uint32_t>& rows, std::size_t max_samples) const;
+  /// The same with a cap per row: rows[k] up to max_samples[k] samples (`rows` ascending, without repeats).
+  RowFootprints open_footprints(const std::vector<std::uint32_t>& rows, const std::vector<std::size_t>& max_samples) const;
 
  private:
   struct Grid;
@@ -67,8 +69,19 @@ class MeasuredCoverage {
   std::vector<std::pair<std::uint64_t, std::uint32_t>> row_grid_;
 };
 
-/// Every row's whole footprint (nothing measured yet), as a single shot predicts rows by
-/// (PlannerSettings::cell_footprint_samples): MeasuredCoverage(rough, spec, options).open_footprints of all rows.
-RowFootprints whole_row_footprints(const RoughModel& rough, const ModelSpec& spec, std::size_t max_samples, CoverageOptions options = {});
+/// How a single shot on a cell samples its rows' whole footprints (PlannerSettings::cell_footprint_samples).
+struct WholeRowSampling {
+  std::size_t max_samples = 1;  // per row, at most
+  /// One sample per this much of a row's area (mm²); a row under two samples' worth is left to its vertex.
+  /// 0: every row max_samples.
+  double sample_area_mm2 = 0.0;
+  std::vector<std::uint32_t> crease;  // rows sampled whatever their area (crease_rows), ascending
+  std::size_t crease_samples = 0;     // those rows' samples (at least; 0: crease rows as any other)
+};
+
+/// Rows' whole footprints (nothing measured yet), as a single shot predicts rows by
+/// (PlannerSettings::cell_footprint_samples): MeasuredCoverage(rough, spec, options).open_footprints of every
+/// row that `s` gives two samples or more, each with its count.
+RowFootprints whole_row_footprints(const RoughModel& rough, const ModelSpec& spec, const WholeRowSampling& s, CoverageOptions options = {});
 
 }  // namespace scancell::planner

@@ -440,6 +440,12 @@ IcpResult register_points(const std::vector<Eigen::Vector3d>& pts_in, const Mode
   return r;
 }
 
+IcpOptions for_model_error(IcpOptions o, double model_error_mm) {
+  if (!(model_error_mm >= 0.0)) throw std::invalid_argument("for_model_error: model error " + std::to_string(model_error_mm) + " mm; must be >= 0");
+  o.min_conditioning = std::max(o.min_conditioning, std::pow(model_error_mm / o.max_distance_mm, 2));
+  return o;
+}
+
 double correction_weight(const PoseErrorModel& e, double range_mm, double model_sigma_mm) {
   const double pose2 = e.sigma_p_mm * e.sigma_p_mm + std::pow(e.sigma_a_rad * range_mm, 2);
   const double model2 = model_sigma_mm * model_sigma_mm;

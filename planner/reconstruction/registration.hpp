@@ -112,6 +112,14 @@ IcpResult register_points(const std::vector<Eigen::Vector3d>& points, const Mode
                           const std::vector<Eigen::Vector3d>& pivots = {}, const std::vector<Eigen::Vector3d>& normals = {});
 IcpResult register_scan(const ScanSamples& samples, const ModelCloud& model, const IcpOptions& options = {});
 
+/// `o` for registering to a model that is itself off by up to `model_error_mm` (a fused rough model: about
+/// its voxel). A motion that changes the residuals by √λ of how far it moves the samples (λ as in
+/// IcpOptions::min_conditioning) turns an error e of the model into a pose error of about e / √λ; it is
+/// taken as fixed only while that stays within the pose error bound, λ ≥ (e / max_distance_mm)², and left as
+/// positioned otherwise (a face seen with slivers of its sides, registered to a voxel model: the slivers'
+/// weak hold on its slides dragged it 20° round). 0: `o` as it is; negative: std::invalid_argument.
+IcpOptions for_model_error(IcpOptions o, double model_error_mm);
+
 /// How much of a registration correction to believe (0..1): the positioner's expected error against the
 /// target's. A correction measured against a model that is itself off by σ_model tells the pose only as far
 /// as the pose is less certain than the model (the linear-Gaussian estimate σ_pose² / (σ_pose² + σ_model²)).

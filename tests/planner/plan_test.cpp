@@ -571,7 +571,7 @@ TEST(Plan, ASingleShotOnACellPredictsRowsByTheirFootprints) {
   const ViewPlan f1 = plan_views(box, sensor, spec, by_footprint, o, 1, &cell);
   // Predicted rows whose footprint samples the plan's views measure fewer of than the row needs.
   auto short_rows = [&](const ViewPlan& p) {
-    const RowFootprints fp = whole_row_footprints(p.rough, spec, 8);
+    const RowFootprints fp = whole_row_footprints(p.rough, spec, {8});
     const std::vector<std::uint8_t> seen = samples_seen(fp, p, sensor, spec);
     std::size_t n = 0;
     for (auto r : p.predicted_rows) {

@@ -161,6 +161,50 @@ TEST(MeasuredCoverage, OpenFootprintSamplesLieOnTheFacesOfABentFootprint) {
   EXPECT_GT(off_ridge, 4u);
 }
 
+// A single shot's whole-row footprints (matrix.cell_footprint_samples with cell_footprint_sample_area_mm2):
+// one sample per that much of a row's area, and a row under two samples' worth left to its vertex. On a
+// 40 mm flat patch of 4 mm steps an interior row is a third of six 8 mm² triangles, 16 mm², an edge row a
+// third of three, 8 mm², a corner less. At 5 mm² a sample, the 9 × 9 interior rows take 3 samples each and
+// the rest none; with no area, every row takes the cap.
+TEST(MeasuredCoverage, WholeRowFootprintsSampleEachRowByItsArea) {
+  const TriangleMesh plane = testing::flat_patch(40.0, 4.0);
+  const RoughModel rough = make_rough_model(plane);
+  const ModelSpec spec = thesis_spec();
+  std::vector<std::uint32_t> interior;
+  for (std::uint32_t r = 0; r < rough.size(); ++r) {
+    const Eigen::Vector3d a = rough.points[r].cwiseAbs();
+    const bool inside = a.maxCoeff() < 19.0, corner = a.head<2>().minCoeff() > 19.0;
+    if (inside) interior.push_back(r);
+    if (corner) EXPECT_LT(rough.area_mm2[r], 8.0) << "row at " << rough.points[r].transpose();
+    else EXPECT_NEAR(rough.area_mm2[r], inside ? 16.0 : 8.0, 1e-9) << "row at " << rough.points[r].transpose();
+  }
+  ASSERT_EQ(interior.size(), 81u);
+  const RowFootprints by_area = whole_row_footprints(rough, spec, {8, 5.0});
+  EXPECT_EQ(by_area.rows, interior);
+  for (std::size_t k = 0; k < by_area.size(); ++k) EXPECT_EQ(by_area.first[k + 1] - by_area.first[k], 3u);
+  const RowFootprints every = whole_row_footprints(rough, spec, {8});
+  EXPECT_EQ(every.size(), rough.size());
+  for (std::size_t k = 0; k < every.size(); ++k)
+    EXPECT_EQ(every.first[k + 1] - every.first[k], std::min<std::size_t>(8, MeasuredCoverage(rough, spec).footprint_cells(every.rows[k])));
+  EXPECT_THROW(whole_row_footprints(rough, spec, {0}), ConfigError);
+  EXPECT_THROW(whole_row_footprints(rough, spec, {8, -1.0}), ConfigError);
+}
+
+// Crease rows keep their samples whatever their area: on a 90° roof (z = −|x|) with no row two samples'
+// worth, the footprints are exactly the ridge's rows, 4 samples each on the two faces.
+TEST(MeasuredCoverage, WholeRowFootprintsKeepTheCreaseRows) {
+  TriangleMesh roof = testing::flat_patch(40.0, 4.0);
+  for (auto& v : roof.vertices) v.z() = -std::abs(v.x());
+  const RoughModel rough = make_rough_model(roof);
+  const std::vector<std::uint32_t> ridge = crease_rows(rough, 40.0 * testing::kDeg);
+  ASSERT_EQ(ridge.size(), 11u);
+  for (auto r : ridge) EXPECT_NEAR(rough.points[r].x(), 0.0, 1e-9);
+  const RowFootprints f = whole_row_footprints(rough, thesis_spec(), {8, 100.0, ridge, 4});
+  EXPECT_EQ(f.rows, ridge);
+  for (std::size_t k = 0; k < f.size(); ++k) EXPECT_EQ(f.first[k + 1] - f.first[k], 4u);
+  EXPECT_TRUE(whole_row_footprints(rough, thesis_spec(), {8, 100.0}).rows.empty());
+}
+
 TEST(Replan, MeasuredRowsLeaveTheCover) {
   const TriangleMesh patch = convex_patch(100.0, 0.04, 2.0);
   const SensorModel sensor = thesis_sensor();

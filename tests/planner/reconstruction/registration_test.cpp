@@ -265,5 +265,53 @@ TEST(Registration, PartialRegistrationOfAFaceSeenAloneMovesItOnlyAcrossTheFace) 
   EXPECT_LT(std::hypot(mean.x(), mean.y()), 0.05) << mean.transpose();
 }
 
+/// A face seen with a band of its side, registered to a model that is off by a voxel (a fused rough model:
+/// the side stands 1.5 mm out). The band is 4.7 % of the samples, so it holds the slide across the side
+/// with λ ≈ 0.047: over the default 0.01, the model's error drags the whole view 1.5 mm; for_model_error's
+/// (1.5 / 5)² = 0.09 leaves that slide as positioned and corrects what the face fixes firmly, its height.
+TEST(Registration, AModelOffByAVoxelDoesNotDragAFaceOnViewSideways) {
+  TriangleMesh coarse = load_mesh(testing::source_path("tests/data/cube50.off"));
+  for (auto& v : coarse.vertices)
+    if (v.x() < 1e-9) v.x() = -1.5;
+  const ModelCloud model = ModelCloud::from_mesh(coarse, 0.5);
+  std::vector<Eigen::Vector3d> pts, normals;
+  for (int a = 0; a <= 80; ++a)
+    for (int b = 0; b <= 80; ++b) {
+      pts.emplace_back(5.0 + 0.5 * a, 5.0 + 0.5 * b, 50.3);  // the top, 0.3 mm high
+      normals.emplace_back(0, 0, 1);
+    }
+  for (int a = 0; a <= 80; ++a)
+    for (int c = 0; c < 4; ++c) {
+      pts.emplace_back(0.0, 5.0 + 0.5 * a, 40.3 + 0.5 * c);  // the band of the side x = 0
+      normals.emplace_back(-1, 0, 0);
+    }
+  const double share = 324.0 / static_cast<double>(pts.size());
+  ASSERT_NEAR(share, 0.047, 0.001);
+  const auto mean_motion = [&](const IcpResult& r) {
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (const auto& p : pts) mean += (r.correction * p - p) / static_cast<double>(pts.size());
+    return mean;
+  };
+  IcpOptions o;
+  o.partial = true;
+  const IcpResult loose = register_points(pts, model, o, {}, normals);
+  ASSERT_TRUE(loose.ok) << loose.why;
+  EXPECT_NEAR(mean_motion(loose).x(), -1.5, 0.1);  // dragged by the model's error
+  const IcpOptions strict = for_model_error(o, 1.5);
+  EXPECT_NEAR(strict.min_conditioning, 0.09, 1e-12);  // (1.5 mm / 5 mm)²
+  const IcpResult r = register_points(pts, model, strict, {}, normals);
+  ASSERT_TRUE(r.ok) << r.why;
+  // Free: the slide along the band; and now the slide across the side and the turn about the top's normal,
+  // which only the band held.
+  EXPECT_EQ(loose.free_directions, 1);
+  EXPECT_EQ(r.free_directions, 3);
+  const Eigen::Vector3d m = mean_motion(r);
+  EXPECT_NEAR(m.z(), -0.3, 0.02);
+  EXPECT_LT(std::hypot(m.x(), m.y()), 0.05) << m.transpose();
+  // A model error in the registration's own units: none keeps the options, a negative one is refused.
+  EXPECT_DOUBLE_EQ(for_model_error(o, 0.0).min_conditioning, o.min_conditioning);
+  EXPECT_THROW(for_model_error(o, -1.0), std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace scancell::planner
