@@ -766,14 +766,20 @@ CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>&
   red.forced.assign(m.n_cols(), 0);
   red.dominator.assign(m.n_cols(), -1);
   for (std::uint32_t r = 0; r < m.n_rows; ++r) red.row_alive[r] = !P.cols_of[r].empty();
-  rep.rows = static_cast<std::size_t>(std::count(red.row_alive.begin(), red.row_alive.end(), 1));
   bool greedy_feasible = true;
   {
     std::vector<char> cov(m.n_rows, 0);
     for (auto j : greedy.views) m.columns[j].for_each([&](std::uint32_t r) { cov[r] = 1; });
+    // cover.min_view_gain_mm2: a view is not spent on less area than this, whichever cover picks it. The rows
+    // greedy leaves open for that reason are left to the closed loop here too, so greedy's cover stays a
+    // feasible warm start and the answer is never worse than it (without this, CBC started from nothing).
+    if (st.min_view_gain > 0.0)
+      for (std::uint32_t r = 0; r < m.n_rows; ++r)
+        if (red.row_alive[r] && !cov[r]) red.row_alive[r] = 0, ++rep.rows_below_min_gain;
     for (std::uint32_t r = 0; r < m.n_rows; ++r) greedy_feasible &= !red.row_alive[r] || cov[r];
     greedy_feasible &= !P.registration || greedy.registration_components <= 1;
   }
+  rep.rows = static_cast<std::size_t>(std::count(red.row_alive.begin(), red.row_alive.end(), 1));
   if (greedy_feasible)
     for (auto j : greedy.views) rep.greedy_objective += P.cost[j];
 
@@ -827,6 +833,9 @@ CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>&
   std::snprintf(reason, sizeof reason, "exact (%s): %s, %g views, bound %g, gap %.3f", rep.solver.c_str(),
                 rep.status.c_str(), rep.objective, rep.bound, rep.gap);
   res.stop_reason = reason;
+  if (rep.rows_below_min_gain > 0)
+    res.stop_reason += "; " + std::to_string(rep.rows_below_min_gain) +
+                       " rows left open as no view gains cover.min_view_gain_mm2 on them";
   if (report) *report = rep;
   return res;
 }

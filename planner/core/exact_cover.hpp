@@ -36,6 +36,7 @@ struct ExactReport {
   double greedy_objective = 0.0;  // the warm start's cost (0 when greedy could not cover every row)
   double seconds = 0.0;
   std::size_t rows = 0, rows_after_presolve = 0;
+  std::size_t rows_below_min_gain = 0;  // coverable rows left open as greedy leaves them (cover.min_view_gain_mm2)
   std::size_t columns = 0, columns_after_presolve = 0;
   std::size_t forced_columns = 0, merged_rows = 0, dominated_rows = 0, dominated_columns = 0;
   bool dominance_budget_hit = false;  // presolve stopped dominance checks to bound its own time

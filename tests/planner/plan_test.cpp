@@ -27,6 +27,14 @@
 namespace scancell::planner {
 namespace {
 
+/// WholeRowSampling by its cap and area per sample alone (no crease rows).
+WholeRowSampling sampling(std::size_t max_samples, double sample_area_mm2 = 0.0) {
+  WholeRowSampling s;
+  s.max_samples = max_samples;
+  s.sample_area_mm2 = sample_area_mm2;
+  return s;
+}
+
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
 
@@ -571,7 +579,7 @@ TEST(Plan, ASingleShotOnACellPredictsRowsByTheirFootprints) {
   const ViewPlan f1 = plan_views(box, sensor, spec, by_footprint, o, 1, &cell);
   // Predicted rows whose footprint samples the plan's views measure fewer of than the row needs.
   auto short_rows = [&](const ViewPlan& p) {
-    const RowFootprints fp = whole_row_footprints(p.rough, spec, {8});
+    const RowFootprints fp = whole_row_footprints(p.rough, spec, sampling(8));
     const std::vector<std::uint8_t> seen = samples_seen(fp, p, sensor, spec);
     std::size_t n = 0;
     for (auto r : p.predicted_rows) {

@@ -71,6 +71,27 @@ TEST(ExactCover, FindsTheOptimumWhereGreedyIsProvablySuboptimal) {
   EXPECT_NEAR(r.cumulative_fraction.back(), 1.0, 1e-12);
 }
 
+TEST(ExactCover, RowsGreedyLeavesUnderTheMinimumGainStayOpenAndGreedyWarmStarts) {
+  // The instance above plus row 14 of weight 0.5, which only column 5 sees. With cover.min_view_gain 1 greedy
+  // never spends a view on it (3 views, row 14 open). Exact cover leaves it open too: greedy's 3 views are a
+  // feasible warm start (objective 3, not 0) and the optimum is {T, B}, not {T, B, 5}.
+  const auto m =
+      matrix(15, {range(0, 7), range(7, 14), concat(range(0, 4), range(7, 11)), {4, 5, 11, 12}, {6, 13}, {14}});
+  std::vector<double> w(15, 1.0);
+  w[14] = 0.5;
+  sp::CoverSettings s = exact();
+  s.min_view_gain = 1.0;
+  sp::ExactReport rep;
+  const auto r = sp::exact_cover(m, w, s, {}, &rep);
+  EXPECT_EQ(rep.rows_below_min_gain, 1u);
+  EXPECT_EQ(rep.rows, 14u);
+  EXPECT_EQ(rep.greedy_objective, 3.0);
+  EXPECT_EQ(r.views, (std::vector<std::uint32_t>{0, 1}));
+  EXPECT_TRUE(rep.proven_optimal) << rep.status;
+  EXPECT_NE(r.stop_reason.find("1 rows left open"), std::string::npos) << r.stop_reason;
+  EXPECT_NEAR(r.cumulative_fraction.back(), 14.0 / 14.5, 1e-12);
+}
+
 TEST(ExactCover, CostsChangeTheOptimum) {
   // Same instance, but T and B cost 5 each: the three greedy columns (cost 1) are now optimal.
   const auto m = matrix(14, {range(0, 7), range(7, 14), concat(range(0, 4), range(7, 11)), {4, 5, 11, 12}, {6, 13}});

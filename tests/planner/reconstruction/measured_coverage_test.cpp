@@ -12,6 +12,14 @@
 namespace scancell::planner {
 namespace {
 
+/// WholeRowSampling by its cap and area per sample alone (no crease rows).
+WholeRowSampling sampling(std::size_t max_samples, double sample_area_mm2 = 0.0) {
+  WholeRowSampling s;
+  s.max_samples = max_samples;
+  s.sample_area_mm2 = sample_area_mm2;
+  return s;
+}
+
 SensorModel thesis_sensor() { return load_sensor(testing::source_path("config/sensors/line-scan-thesis.yaml")); }
 ModelSpec thesis_spec() { return load_spec(testing::source_path("config/spec/thesis.yaml")); }
 
@@ -179,15 +187,15 @@ TEST(MeasuredCoverage, WholeRowFootprintsSampleEachRowByItsArea) {
     else EXPECT_NEAR(rough.area_mm2[r], inside ? 16.0 : 8.0, 1e-9) << "row at " << rough.points[r].transpose();
   }
   ASSERT_EQ(interior.size(), 81u);
-  const RowFootprints by_area = whole_row_footprints(rough, spec, {8, 5.0});
+  const RowFootprints by_area = whole_row_footprints(rough, spec, sampling(8, 5.0));
   EXPECT_EQ(by_area.rows, interior);
   for (std::size_t k = 0; k < by_area.size(); ++k) EXPECT_EQ(by_area.first[k + 1] - by_area.first[k], 3u);
-  const RowFootprints every = whole_row_footprints(rough, spec, {8});
+  const RowFootprints every = whole_row_footprints(rough, spec, sampling(8));
   EXPECT_EQ(every.size(), rough.size());
   for (std::size_t k = 0; k < every.size(); ++k)
     EXPECT_EQ(every.first[k + 1] - every.first[k], std::min<std::size_t>(8, MeasuredCoverage(rough, spec).footprint_cells(every.rows[k])));
-  EXPECT_THROW(whole_row_footprints(rough, spec, {0}), ConfigError);
-  EXPECT_THROW(whole_row_footprints(rough, spec, {8, -1.0}), ConfigError);
+  EXPECT_THROW(whole_row_footprints(rough, spec, sampling(0)), ConfigError);
+  EXPECT_THROW(whole_row_footprints(rough, spec, sampling(8, -1.0)), ConfigError);
 }
 
 // Crease rows keep their samples whatever their area: on a 90° roof (z = −|x|) with no row two samples'
@@ -202,7 +210,7 @@ TEST(MeasuredCoverage, WholeRowFootprintsKeepTheCreaseRows) {
   const RowFootprints f = whole_row_footprints(rough, thesis_spec(), {8, 100.0, ridge, 4});
   EXPECT_EQ(f.rows, ridge);
   for (std::size_t k = 0; k < f.size(); ++k) EXPECT_EQ(f.first[k + 1] - f.first[k], 4u);
-  EXPECT_TRUE(whole_row_footprints(rough, thesis_spec(), {8, 100.0}).rows.empty());
+  EXPECT_TRUE(whole_row_footprints(rough, thesis_spec(), sampling(8, 100.0)).rows.empty());
 }
 
 TEST(Replan, MeasuredRowsLeaveTheCover) {
