@@ -84,6 +84,8 @@ CaseResult run_case(const sp::TriangleMesh& mesh_mm, std::size_t rough_vertices,
   std::printf("  %-44s %10.4f\n", "matrix density", p.matrix_density);
   std::printf("  %-44s %10llu\n", "pairs total (s x v)", static_cast<unsigned long long>(ms.pairs_total));
   std::printf("  %-44s %10llu\n", "pairs culled by block sphere", static_cast<unsigned long long>(ms.pairs_block_culled));
+  std::printf("  %-44s %10llu\n", "pairs culled by block normal cone", static_cast<unsigned long long>(ms.pairs_normal_culled));
+  std::printf("  %-44s %10llu\n", "pairs in frustum (tested rows)", static_cast<unsigned long long>(ms.pairs_in_frustum));
   std::printf("  %-44s %10llu\n", "pairs surviving (frustum + facing)", static_cast<unsigned long long>(ms.pairs_surviving));
   std::printf("  %-44s %10llu\n", "rays cast", static_cast<unsigned long long>(ms.rays_cast));
   CaseResult res;

@@ -66,21 +66,14 @@ struct PlannerSettings {
   /// the cell oracle; by 4 samples 30). 0 here, 4 in config/planner/default.yaml. Under the registration
   /// constraint (eq. 4.2) two views overlap on such a row when each measures some of its samples
   /// (overlap_by_footprint_rows): counted by samples, a box's edge no longer let views of two faces register
-  /// and the constraint left faces unplanned (docs/quality.md). Not under exact cover with the constraint
-  /// (crease_samples_apply).
+  /// and the constraint left faces unplanned (docs/quality.md). Every cover counts overlap so, exact
+  /// cover included (MeasurabilityMatrix::overlap).
   int crease_footprint_samples = 0;
   double crease_angle_rad = 0.6981317007977318;  // 40°: every 90° edge, however its faces weigh the normal
   std::uint64_t seed = 1;
   /// Keep every evaluated candidate in the plan (ViewPlan::candidate_views), for benchmarks and diagnostics.
   bool keep_candidates = false;
 };
-
-/// Whether a plan predicts its crease rows by footprint samples (crease_footprint_samples > 0): under every
-/// cover but exact with the registration constraint, whose solver counts overlap in its matrix's own rows
-/// and not by footprint rows (exact_cover.hpp).
-inline bool crease_samples_apply(const PlannerSettings& s) {
-  return s.crease_footprint_samples > 0 && !(s.cover.mode == CoverMode::exact && registration_applies(s.cover));
-}
 
 SensorModel load_sensor(const std::filesystem::path& file, KeyDeclarations* declared = nullptr);
 ModelSpec load_spec(const std::filesystem::path& file);

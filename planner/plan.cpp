@@ -272,6 +272,7 @@ void append_candidates(const Stage& s, const OcclusionScene& scene, const ModelS
   for (auto& c : more.columns) matrix.columns.push_back(std::move(c));
   p.matrix_stats.pairs_total += st.pairs_total;
   p.matrix_stats.pairs_block_culled += st.pairs_block_culled;
+  p.matrix_stats.pairs_normal_culled += st.pairs_normal_culled;
   p.matrix_stats.pairs_in_frustum += st.pairs_in_frustum;
   p.matrix_stats.pairs_surviving += st.pairs_surviving;
   p.matrix_stats.pairs_compliant += st.pairs_compliant;
@@ -372,7 +373,16 @@ void choose_cover(ViewPlan& p, const MeasurabilityMatrix& matrix, const std::vec
       for (std::size_t i = 0; i < candidates.size(); ++i)
         cost.push_back(scan_time_s(*p.cell, candidates[i].scan_length_mm) + 0.5 * move_time_s(*p.cell, p.cell->home(), q_of[i]) +
                        1e-3);
-    p.cover = exact_cover(matrix, row_weight, p.settings.cover, cost, &p.exact);
+    // Started from the default cover (constrained greedy improved by the local search), so exact mode is never
+    // worse than it: from greedy alone CBC's 10 s ended above it on large instances (knot1: 152 against 140).
+    CoverSettings default_cover = p.settings.cover;
+    default_cover.mode = registration_applies(p.settings.cover) ? CoverMode::constrained : CoverMode::greedy;
+    p.cover = greedy_cover(matrix, row_weight, default_cover);
+    improve_by_local_search(matrix, row_weight, p);
+    const std::size_t start_views = p.cover.views.size();
+    p.cover = exact_cover(matrix, row_weight, p.settings.cover, cost, &p.exact, p.cover.views);
+    if (p.exact.start_objective > 0.0)
+      p.cover.stop_reason += "; started from the local search's " + std::to_string(start_views) + " views";
     p.exact_used = true;
   } else {
     p.cover = greedy_cover(matrix, row_weight, p.settings.cover);
@@ -510,7 +520,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     // coverage); or, in a single shot on a cell when matrix.cell_footprint_samples says so, every row by its
     // whole footprint, but for rows under two samples' worth of area (matrix.cell_footprint_sample_area_mm2),
     // left to their vertex unless on a crease; else the rows on a crease (matrix.crease_footprint_samples,
-    // crease_samples_apply). Only a replan's also get candidates aimed at them (the stage's `footprints`): for
+    // crease_footprint_samples). Only a replan's also get candidates aimed at them (the stage's `footprints`): for
     // every row of a single shot those are five more per row, and 13-14 s more of plan for 5k rows
     // (docs/quality.md).
     RowFootprints whole;
@@ -519,13 +529,13 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     if (!footprints && !measured_rows) {
       if (p.cell && settings.cell_footprint_samples > 0) {
         WholeRowSampling sampling{static_cast<std::size_t>(settings.cell_footprint_samples), settings.cell_footprint_sample_area_mm2, {}, 0};
-        if (settings.cell_footprint_sample_area_mm2 > 0.0 && crease_samples_apply(settings)) {
+        if (settings.cell_footprint_sample_area_mm2 > 0.0 && settings.crease_footprint_samples > 0) {
           sampling.crease = crease_rows(p.rough, settings.crease_angle_rad);
           sampling.crease_samples = static_cast<std::size_t>(settings.crease_footprint_samples);
         }
         whole = whole_row_footprints(p.rough, spec, sampling);
         every_row = true;
-      } else if (crease_samples_apply(settings)) {
+      } else if (settings.crease_footprint_samples > 0) {
         whole = MeasuredCoverage(p.rough, spec)
                     .open_footprints(crease_rows(p.rough, settings.crease_angle_rad), static_cast<std::size_t>(settings.crease_footprint_samples));
       }
@@ -570,8 +580,9 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
       // Under the between-view constraint (eq. 4.2) two views overlap on a footprint row when each measures
       // some of its samples: counted by samples, a box's edge row no longer lets views of its two faces
       // register, nothing else does at the spec, and the cover stopped with faces unplanned (a 120 x 80 x 40
-      // box at 600 rows: 0.26 in free space). exact_cover counts overlap in its own rows (crease_samples_apply).
-      if (settings.cover.mode == CoverMode::constrained)
+      // box at 600 rows: 0.26 in free space). The constrained cover, the local search and exact cover all count
+      // overlap in them.
+      if (registration_applies(settings.cover))
         samples->matrix.overlap = overlap_by_footprint_rows(*samples, *predicted_by, row_weight);
       p.times.matrix_samples_s = seconds_since(t_samples);
     }
@@ -911,11 +922,7 @@ std::string plan_summary(const ViewPlan& p) {
   os << buf << p.cover.stop_reason << "\n";
   if (p.rows_by_footprint_samples > 0) {
     os << "rows predicted by footprint samples: " << p.rows_by_footprint_samples
-       << (p.settings.cover.mode == CoverMode::constrained ? " (registration overlap counted by their rows)" : "") << "\n";
-  } else if (p.settings.crease_footprint_samples > 0 && !crease_samples_apply(p.settings)) {
-    // Not silent: the settings ask for crease samples and this cover cannot use them (crease_samples_apply).
-    os << "crease rows: by the vertex under exact cover with the registration constraint (matrix.crease_footprint_samples "
-          "applies to the greedy and constrained covers)\n";
+       << (registration_applies(p.settings.cover) ? " (registration overlap counted by their rows)" : "") << "\n";
   }
   std::snprintf(buf, sizeof buf,
                 "times (s): rough %.3f  scene %.3f  viewpoints %.3f  matrix %.3f  cover %.3f  total %.3f  (%d threads)\n",

@@ -50,21 +50,42 @@ struct Problem {
   bool registration = false;
   bool core = false;  // the ILP holds only a core of the columns
   double forced_cost = 0.0;
+  // What the registration constraint counts overlap in (overlap_of): the matrix's own rows and weights, or its
+  // `overlap` (a cover by footprint samples shares a rough-model row between two views: footprint.hpp).
+  const MeasurabilityMatrix* om = nullptr;
+  const std::vector<double>* ow = nullptr;
+  std::vector<std::vector<std::uint32_t>> ocols_of;  // overlap row -> columns, when om is not m
   mutable std::unordered_map<std::uint32_t, std::vector<std::uint32_t>> neighbours_cache;
 
-  double column_weight(std::uint32_t j) const {
+  /// Sets m and w, what overlap is counted in, and the row -> columns indices.
+  void index(const MeasurabilityMatrix& matrix, const std::vector<double>& weight) {
+    m = &matrix;
+    w = &weight;
+    const OverlapView o = overlap_of(matrix, weight);
+    om = &o.m;
+    ow = &o.w;
+    cols_of.assign(m->n_rows, {});
+    for (std::uint32_t j = 0; j < m->n_cols(); ++j) m->columns[j].for_each([&](std::uint32_t r) { cols_of[r].push_back(j); });
+    ocols_of.clear();
+    if (om != m) {
+      ocols_of.assign(om->n_rows, {});
+      for (std::uint32_t j = 0; j < om->n_cols(); ++j) om->columns[j].for_each([&](std::uint32_t r) { ocols_of[r].push_back(j); });
+    }
+  }
+  double column_weight(std::uint32_t j) const {  // in what overlap is counted in
     double s = 0.0;
-    m->columns[j].for_each([&](std::uint32_t r) { s += (*w)[r]; });
+    om->columns[j].for_each([&](std::uint32_t r) { s += (*ow)[r]; });
     return s;
   }
   /// Columns k with σ(j, k) ≥ t_r, from the row -> columns index (shared weight accumulated per column).
   const std::vector<std::uint32_t>& neighbours(std::uint32_t j) const {
     auto it = neighbours_cache.find(j);
     if (it != neighbours_cache.end()) return it->second;
+    const auto& index_of = om == m ? cols_of : ocols_of;
     std::unordered_map<std::uint32_t, double> shared;
-    m->columns[j].for_each([&](std::uint32_t r) {
-      for (auto k : cols_of[r])
-        if (k != j) shared[k] += (*w)[r];
+    om->columns[j].for_each([&](std::uint32_t r) {
+      for (auto k : index_of[r])
+        if (k != j) shared[k] += (*ow)[r];
     });
     const double wj = column_weight(j);
     double ms = 0.0;
@@ -467,8 +488,8 @@ void disjoint_rows_bound(const Problem& P, ExactReport& rep) {
 }
 
 /// The Lagrangian bound and, on large instances, the core problem (below).
-void lagrangian_bound_and_core(Problem& P, const Reduction& red, const CoverResult& greedy, const CoverSettings& st,
-                               Clock::time_point t0, ExactReport& rep) {
+void lagrangian_bound_and_core(Problem& P, const Reduction& red, const std::vector<std::uint32_t>& warm, double warm_objective,
+                               const CoverSettings& st, Clock::time_point t0, ExactReport& rep) {
   // Lagrangian bound (subgradient on the row constraints): close to the LP bound at a fraction of the root
   // LP's cost, and valid whatever CBC manages before the time limit. A quarter of the limit at most.
   if (!P.rows.empty()) {
@@ -483,7 +504,7 @@ void lagrangian_bound_and_core(Problem& P, const Reduction& red, const CoverResu
       for (int j : P.rows[i]) best = std::min(best, c[j] / static_cast<double>(rows_of[j].size()));
       u[i] = best;
     }
-    const double ub = rep.greedy_objective > 0.0 ? rep.greedy_objective - P.forced_cost : 1e9;
+    const double ub = warm_objective > 0.0 ? warm_objective - P.forced_cost : 1e9;
     const auto lag_deadline = t0 + std::chrono::duration_cast<Clock::duration>(
                                        std::chrono::duration<double>(std::min(2.0, 0.25 * st.exact_time_limit_s)));
     double lambda = 2.0, best_l = -1e300;
@@ -535,7 +556,7 @@ void lagrangian_bound_and_core(Problem& P, const Reduction& red, const CoverResu
         });
         for (std::size_t i = 0; i < k; ++i) in_core[byc[i]] = 1;
       }
-      for (auto j0 : greedy.views) {
+      for (auto j0 : warm) {
         const std::int64_t j = red.reduced_column(j0);
         if (j >= 0 && P.ilp_of[j] >= 0) in_core[P.ilp_of[j]] = 1;
       }
@@ -558,10 +579,10 @@ void lagrangian_bound_and_core(Problem& P, const Reduction& red, const CoverResu
   }
 }
 
-/// Warm start in the reduced space: greedy's views, a dropped view replaced by its dominator.
-void warm_start(Problem& P, const Reduction& red, const CoverResult& greedy) {
+/// Warm start in the reduced space: the warm cover's views, a dropped view replaced by its dominator.
+void warm_start(Problem& P, const Reduction& red, const std::vector<std::uint32_t>& warm) {
   P.warm.assign(P.ilp_col.size(), 0.0);
-  for (auto j0 : greedy.views) {
+  for (auto j0 : warm) {
     const std::int64_t j = red.reduced_column(j0);
     if (j >= 0 && P.ilp_of[j] >= 0) P.warm[P.ilp_of[j]] = 1.0;
   }
@@ -609,6 +630,12 @@ std::string encode_problem(const Problem& P, double seconds_left) {
   append_binary<std::uint64_t>(out, P.m->n_cols());
   for (const auto& c : P.m->columns) put_all(out, c.rows());
   put_all(out, *P.w);
+  append_binary<std::uint8_t>(out, P.m->overlap ? 1 : 0);
+  if (P.m->overlap) {
+    append_binary<std::uint32_t>(out, P.om->n_rows);
+    for (const auto& c : P.om->columns) put_all(out, c.rows());
+    put_all(out, *P.ow);
+  }
   append_binary<std::uint8_t>(out, static_cast<std::uint8_t>(P.st->normalizer));
   append_binary<double>(out, P.st->registration_threshold);
   put_all(out, P.cost);
@@ -635,12 +662,18 @@ int worker_main(int out_fd, const std::string&) try {
   m.columns.resize(in.get<std::uint64_t>());
   for (auto& c : m.columns) c = MeasurabilityColumn(in.get_all<std::uint32_t>(), m.n_rows);
   const std::vector<double> w = in.get_all<double>();
+  if (in.get<std::uint8_t>() != 0) {
+    auto o = std::make_shared<OverlapRows>();
+    o->matrix.n_rows = in.get<std::uint32_t>();
+    o->matrix.columns.resize(m.n_cols());
+    for (auto& c : o->matrix.columns) c = MeasurabilityColumn(in.get_all<std::uint32_t>(), o->matrix.n_rows);
+    o->weight = in.get_all<double>();
+    m.overlap = std::move(o);
+  }
   CoverSettings st;
   st.normalizer = static_cast<RegistrationNormalizer>(in.get<std::uint8_t>());
   st.registration_threshold = in.get<double>();
   Problem P;
-  P.m = &m;
-  P.w = &w;
   P.st = &st;
   P.cost = in.get_all<double>();
   P.ilp_col = in.get_all<std::uint32_t>();
@@ -655,8 +688,7 @@ int worker_main(int out_fd, const std::string&) try {
   if (!in.done() || w.size() != m.n_rows || P.cost.size() != m.n_cols()) throw std::runtime_error("exact_cover worker: inconsistent input");
   P.ilp_of.assign(m.n_cols(), -1);
   for (std::size_t j = 0; j < P.ilp_col.size(); ++j) P.ilp_of.at(P.ilp_col[j]) = static_cast<std::int64_t>(j);
-  P.cols_of.assign(m.n_rows, {});
-  for (std::uint32_t j = 0; j < m.n_cols(); ++j) m.columns[j].for_each([&](std::uint32_t r) { P.cols_of[r].push_back(j); });
+  P.index(m, w);
   run_worker(P, out_fd, Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(seconds_left)));
 } catch (const std::exception& e) {
   send(out_fd, std::string("E the solver's worker failed: ") + e.what() + "\n");
@@ -727,22 +759,31 @@ std::string solve_in_worker(const Problem& P, Clock::time_point deadline, ExactR
   return end_status;
 }
 
+/// Whether `start` (original columns) covers every row the program keeps and, under the registration
+/// constraint, its overlap graph is connected.
+bool start_is_feasible(const Problem& P, const Reduction& red, const std::vector<std::uint32_t>& start) {
+  const MeasurabilityMatrix& m = *P.m;
+  std::vector<char> cov(m.n_rows, 0);
+  for (auto j : start) {
+    if (j >= m.n_cols()) throw std::invalid_argument("exact_cover: start column " + std::to_string(j) + " of " + std::to_string(m.n_cols()));
+    m.columns[j].for_each([&](std::uint32_t r) { cov[r] = 1; });
+  }
+  for (std::uint32_t r = 0; r < m.n_rows; ++r)
+    if (red.row_alive[r] && !cov[r]) return false;
+  return !P.registration || P.components(start).size() <= 1;
+}
+
 }  // namespace
 
 CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>& w, const CoverSettings& st,
-                        const std::vector<double>& cost_in, ExactReport* report) {
+                        const std::vector<double>& cost_in, ExactReport* report, const std::vector<std::uint32_t>& start) {
   const auto t0 = Clock::now();
   if (w.size() != m.n_rows) throw std::invalid_argument("exact_cover: one weight per row required");
-  if (m.overlap && registration_applies(st))
-    throw std::invalid_argument("exact_cover: the registration constraint counts overlap in the matrix's own rows, not in "
-                                "MeasurabilityMatrix::overlap");
   if (st.coverage_goal < 1.0 - 1e-12)
     throw ConfigError("cover.mode exact covers every measurable row: the spec's coverage_goal must be 1");
   ExactReport rep;
   rep.solver = std::string("CBC ") + CBC_VERSION;
   Problem P;
-  P.m = &m;
-  P.w = &w;
   P.st = &st;
   P.registration = registration_applies(st);
   P.cost = cost_in.empty() ? std::vector<double>(m.n_cols(), 1.0) : cost_in;
@@ -758,8 +799,7 @@ CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>&
   gs.eliminate_redundant = true;
   const CoverResult greedy = greedy_cover(m, w, gs);
 
-  P.cols_of.assign(m.n_rows, {});
-  for (std::uint32_t j = 0; j < m.n_cols(); ++j) m.columns[j].for_each([&](std::uint32_t r) { P.cols_of[r].push_back(j); });
+  P.index(m, w);
   Reduction red;
   red.row_alive.assign(m.n_rows, 0);
   red.col_alive.assign(m.n_cols(), 1);
@@ -782,15 +822,26 @@ CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>&
   rep.rows = static_cast<std::size_t>(std::count(red.row_alive.begin(), red.row_alive.end(), 1));
   if (greedy_feasible)
     for (auto j : greedy.views) rep.greedy_objective += P.cost[j];
+  // The caller's start (the local search's cover, plan.cpp) replaces greedy as warm start and answer of record
+  // when it covers every row the program keeps, registers and costs less: the default cover improves on
+  // greedy, and exact mode must never be worse than the default (knot1 in free space: 152 views after CBC's
+  // 10 s from greedy's 163, where the local search had 140; docs/quality.md).
+  std::vector<std::uint32_t> warm = greedy_feasible ? greedy.views : std::vector<std::uint32_t>{};
+  double warm_obj = greedy_feasible ? rep.greedy_objective : 0.0;
+  if (!start.empty() && start_is_feasible(P, red, start) && (warm.empty() || P.objective(start) < warm_obj - 1e-9)) {
+    warm = start;
+    std::sort(warm.begin(), warm.end());
+    warm_obj = rep.start_objective = P.objective(warm);
+  }
 
   presolve(P, red, rep);
   build_program(P, red, rep);
   disjoint_rows_bound(P, rep);
-  lagrangian_bound_and_core(P, red, greedy, st, t0, rep);
-  if (greedy_feasible) warm_start(P, red, greedy);
+  lagrangian_bound_and_core(P, red, warm, warm_obj, st, t0, rep);
+  if (!warm.empty()) warm_start(P, red, warm);
 
-  std::vector<std::uint32_t> best_set = greedy_feasible ? greedy.views : std::vector<std::uint32_t>{};
-  double best_obj = greedy_feasible ? rep.greedy_objective : 1e300;
+  std::vector<std::uint32_t> best_set = warm;
+  double best_obj = warm.empty() ? 1e300 : warm_obj;
   std::string end_status;
   const auto deadline = t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(st.exact_time_limit_s));
 
@@ -817,8 +868,8 @@ CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>&
   rep.objective = best_set.empty() ? 0.0 : best_obj;
   rep.bound = std::min(rep.bound, rep.objective > 0.0 ? rep.objective : rep.bound);
   rep.gap = rep.objective > 0.0 ? (rep.objective - rep.bound) / rep.objective : 0.0;
-  if (!rep.proven_optimal && !infeasible && rep.improved_solutions == 0 && greedy_feasible)
-    end_status = "greedy kept: " + end_status;
+  if (!rep.proven_optimal && !infeasible && rep.improved_solutions == 0 && !warm.empty())
+    end_status = (rep.start_objective > 0.0 ? "start kept: " : "greedy kept: ") + end_status;
   rep.status = end_status;
   rep.seconds = seconds_since(t0);
 

@@ -17,8 +17,8 @@
 //   cost, plus the warm start), whose covers are covers of the whole; the Lagrangian bound stays the bound.
 // - Anytime: CBC runs in a forked worker that streams every feasible cover and bound it finds; at the time
 //   limit the worker is killed, whatever phase it is in (CBC does not honour its limit inside the root LP).
-//   The greedy cover (redundancy-eliminated) is the warm start and the answer of record, so exact mode is
-//   never worse than greedy.
+//   The greedy cover (redundancy-eliminated), or the caller's start when cheaper, is the warm start and the
+//   answer of record, so exact mode is never worse than either.
 #include <string>
 #include <vector>
 
@@ -28,12 +28,13 @@ namespace scancell::planner {
 
 struct ExactReport {
   std::string solver;             // "CBC <version>"
-  std::string status;             // optimal | time limit | infeasible: why | greedy kept: why
+  std::string status;             // optimal | time limit | infeasible: why | greedy kept: why | start kept: why
   double objective = 0.0;         // Σ c_j of the returned cover
   double bound = 0.0;             // proven lower bound on the optimum
   double lagrangian_bound = 0.0;  // the subgradient (Lagrangian) bound computed before CBC starts
   double gap = 0.0;               // (objective − bound) / objective
-  double greedy_objective = 0.0;  // the warm start's cost (0 when greedy could not cover every row)
+  double greedy_objective = 0.0;  // greedy's cost (0 when greedy could not cover every row)
+  double start_objective = 0.0;   // the caller's start cover's cost when it was the warm start (0: greedy was)
   double seconds = 0.0;
   std::size_t rows = 0, rows_after_presolve = 0;
   std::size_t rows_below_min_gain = 0;  // coverable rows left open as greedy leaves them (cover.min_view_gain_mm2)
@@ -45,11 +46,13 @@ struct ExactReport {
   bool proven_optimal = false;
 };
 
-/// `column_cost`: one positive cost per column (expected move time, ...), or empty for c_j = 1. The result's
-/// views are ordered as greedy would take them; its stop_reason names the solver outcome. Throws ConfigError
-/// when the settings' coverage goal is below 1 (the program covers every measurable row).
+/// `column_cost`: one positive cost per column (expected move time, ...), or empty for c_j = 1. `start`: a
+/// cover to start from (the local search's), the warm start and answer of record instead of greedy's when it
+/// covers every row greedy's does, registers and costs less; otherwise ignored. The result's views are
+/// ordered as greedy would take them; its stop_reason names the solver outcome. Throws ConfigError when the
+/// settings' coverage goal is below 1 (the program covers every measurable row).
 CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>& row_weight,
                         const CoverSettings& settings, const std::vector<double>& column_cost = {},
-                        ExactReport* report = nullptr);
+                        ExactReport* report = nullptr, const std::vector<std::uint32_t>& start = {});
 
 }  // namespace scancell::planner

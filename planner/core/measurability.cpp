@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <numbers>
 #include <stdexcept>
 
 #include <tbb/parallel_for.h>
@@ -18,21 +19,46 @@ constexpr std::size_t kPairsPerFlush = 128;  // 256 occlusion rays per Embree st
 struct Block {
   Eigen::Vector3d centre;
   double radius;
+  Eigen::Vector3d normal_axis;  // the axis of its rows' normal cone
+  double min_facing_dot;        // a camera whose +z has less than this with the axis measures none of its rows
 };
 
-std::vector<Block> make_blocks(const RoughModel& rough) {
+/// How far (rad) from the camera's +z a normal the element test can pass turns at most: the grazing thresholds
+/// (eq. 3.4's U_i) bound the normal's inclination in x-z by θ_xz plus the ray's own (half the fan) and in y-z
+/// by θ_yz (plus half the frame's height on a random-access sensor), so tan² of its angle to +z is below
+/// tan²(θ_xz + Φx/2) + tan²(θ_yz + Φy/2). π when either bound reaches 90° (nothing to cull by).
+double facing_limit_rad(const SensorModel& s) {
+  const double a = s.grazing_xz_rad + 0.5 * s.fov_x_rad;
+  const double b = s.grazing_yz_rad + (s.kind == SensorKind::random_access ? 0.5 * s.fov_y_rad : 0.0);
+  if (!(a < 0.5 * std::numbers::pi) || !(b < 0.5 * std::numbers::pi)) return std::numbers::pi;
+  return std::atan(std::hypot(std::tan(a), std::tan(b)));
+}
+
+/// Blocks of kBlock consecutive rows: a bounding sphere for the frustum cull, and a normal cone (axis, half
+/// angle α) for the facing cull: a row's normal is at least (angle(axis, +z) − α) from the camera's +z, so a
+/// block whose axis turns more than α + facing_limit_rad from it holds no row the test can pass.
+std::vector<Block> make_blocks(const RoughModel& rough, double facing_limit) {
   std::vector<Block> blocks;
   for (std::uint32_t b = 0; b < rough.size(); b += kBlock) {
     const std::uint32_t e = std::min<std::uint32_t>(b + kBlock, rough.size());
-    Eigen::Vector3d lo = rough.points[b], hi = rough.points[b];
+    Eigen::Vector3d lo = rough.points[b], hi = rough.points[b], sum = Eigen::Vector3d::Zero();
     for (std::uint32_t i = b; i < e; ++i) {
       lo = lo.cwiseMin(rough.points[i]);
       hi = hi.cwiseMax(rough.points[i]);
+      sum += rough.normals[i];
     }
     const Eigen::Vector3d c = 0.5 * (lo + hi);
     double r = 0.0;
     for (std::uint32_t i = b; i < e; ++i) r = std::max(r, (rough.points[i] - c).norm());
-    blocks.push_back({c, r});
+    Block block{c, r, Eigen::Vector3d::UnitZ(), -2.0};  // -2: never culled by facing
+    if (sum.norm() > 1e-9 && facing_limit < std::numbers::pi) {
+      block.normal_axis = sum.normalized();
+      double cos_alpha = 1.0;
+      for (std::uint32_t i = b; i < e; ++i) cos_alpha = std::min(cos_alpha, block.normal_axis.dot(rough.normals[i].normalized()));
+      const double reach = std::acos(std::clamp(cos_alpha, -1.0, 1.0)) + facing_limit + 1e-6;  // slack for rounding
+      if (reach < std::numbers::pi) block.min_facing_dot = std::cos(reach);
+    }
+    blocks.push_back(block);
   }
   return blocks;
 }
@@ -100,11 +126,12 @@ bool all_clear(const std::uint8_t* occluded, std::size_t n) {
 }
 
 struct Counters {
-  std::atomic<std::uint64_t> block_culled{0}, in_frustum{0}, surviving{0}, compliant{0}, rays{0}, measurable{0};
+  std::atomic<std::uint64_t> block_culled{0}, normal_culled{0}, in_frustum{0}, surviving{0}, compliant{0}, rays{0}, measurable{0};
   void export_to(MatrixStats* stats, std::uint64_t total) const {
     if (!stats) return;
     stats->pairs_total = total;
     stats->pairs_block_culled = block_culled;
+    stats->pairs_normal_culled = normal_culled;
     stats->pairs_in_frustum = in_frustum;
     stats->pairs_surviving = surviving;
     stats->pairs_compliant = compliant;
@@ -227,6 +254,10 @@ class ColumnWorker {
     } else {
       for (std::uint32_t b = 0; b < blocks_.size(); ++b) {
         const std::uint32_t begin = b * kBlock, end = std::min<std::uint32_t>(begin + kBlock, n_rows);
+        if (r_.col(2).dot(blocks_[b].normal_axis) < blocks_[b].min_facing_dot) {  // the block faces away
+          tally_.normal_culled += end - begin;
+          continue;
+        }
         if (!sphere_may_touch_frustum(lv_.wide.sensor, lv_.wide.terms, v.scan_length_mm * lv_.wide.length_factor,
                                       rt_ * (blocks_[b].centre - v.position), blocks_[b].radius)) {
           tally_.culled += end - begin;
@@ -238,6 +269,7 @@ class ColumnWorker {
     flush(v, r_, column, plain_column);
     if (plain_) std::sort(plain_column.begin(), plain_column.end());  // rows the near-miss rays failed joined late
     cnt.block_culled += tally_.culled;
+    cnt.normal_culled += tally_.normal_culled;
     cnt.in_frustum += tally_.in_frustum;
     cnt.surviving += tally_.surviving;
     cnt.compliant += tally_.compliant;
@@ -265,7 +297,7 @@ class ColumnWorker {
   }
 
   struct Tally {
-    std::uint64_t culled = 0, in_frustum = 0, surviving = 0, compliant = 0;
+    std::uint64_t culled = 0, normal_culled = 0, in_frustum = 0, surviving = 0, compliant = 0;
   };
   struct Pending {
     std::uint32_t row;
@@ -353,7 +385,7 @@ MeasurabilityMatrix build_measurability(const RoughModel& rough, const Occlusion
   MeasurabilityMatrix m;
   m.n_rows = static_cast<std::uint32_t>(rough.size());
   m.columns.resize(candidates.size());
-  const auto blocks = make_blocks(rough);
+  const auto blocks = make_blocks(rough, facing_limit_rad(sensor));
   const double eps = ray_offset_mm(rough, settings);
   // Two levels of the same test: `tight` makes the matrix; `wide` is the plain one whose elements the caller
   // also wants, or (without) the tight one with its undisplaced rays only. Every level's countermeasures are

@@ -76,6 +76,7 @@ struct OverlapRows {
 struct MatrixStats {
   std::uint64_t pairs_total = 0;        // rows × columns
   std::uint64_t pairs_block_culled = 0; // skipped with their whole block (bounding sphere outside the frustum)
+  std::uint64_t pairs_normal_culled = 0;  // skipped with their whole block (its normal cone faces away from the camera)
   std::uint64_t pairs_in_frustum = 0;
   std::uint64_t pairs_surviving = 0;    // in frustum and facing both laser and receiver
   std::uint64_t pairs_compliant = 0;    // ... and meeting thresholds, precision, density: these cast rays

@@ -5,6 +5,7 @@
 
 #include "planner/config.hpp"
 #include "planner/geometry/mesh.hpp"
+#include "planner/reconstruction/measured_coverage.hpp"
 
 namespace scancell::planner::testing {
 
@@ -14,6 +15,14 @@ inline std::string source_path(const std::string& rel) { return std::string(SCAN
 
 inline SensorModel thesis_sensor() { return load_sensor(source_path("config/sensors/line-scan-thesis.yaml")); }
 inline ModelSpec thesis_spec() { return load_spec(source_path("config/spec/thesis.yaml")); }
+
+/// WholeRowSampling by its cap and area per sample alone (no crease rows).
+inline WholeRowSampling sampling(std::size_t max_samples, double sample_area_mm2 = 0.0) {
+  WholeRowSampling s;
+  s.max_samples = max_samples;
+  s.sample_area_mm2 = sample_area_mm2;
+  return s;
+}
 
 /// A committed mesh (tests/data/NAME) scaled so that its longest bounding-box side is `longest_mm`.
 inline TriangleMesh test_mesh_mm(const std::string& name, double longest_mm = 200.0) {

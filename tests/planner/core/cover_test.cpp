@@ -134,13 +134,13 @@ TEST(Constrained, OverlapCountedInOtherRowsLetsTwoFacesRegister) {
   con.registration_threshold = 0.25;
   EXPECT_EQ(greedy_cover(m, ones(6), con).views.size(), 1u);
 
-  // A malformed overlap is refused, and so is exact cover with the constraint (CBC counts the matrix's rows).
+  // A malformed overlap is refused, by greedy and by exact cover (which counts overlap in it too:
+  // ExactCover.OverlapCountedInOtherRowsConnectsTheCover).
   auto bad = std::make_shared<OverlapRows>(*o);
   bad->weight.pop_back();
   m.overlap = bad;
   EXPECT_THROW(greedy_cover(m, ones(6), con), std::invalid_argument);
-  m.overlap = o;
-  CoverSettings exact;
+  CoverSettings exact = con;
   exact.mode = CoverMode::exact;
   EXPECT_THROW(exact_cover(m, ones(6), exact), std::invalid_argument);
 }

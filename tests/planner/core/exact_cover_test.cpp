@@ -92,6 +92,52 @@ TEST(ExactCover, RowsGreedyLeavesUnderTheMinimumGainStayOpenAndGreedyWarmStarts)
   EXPECT_NEAR(r.cumulative_fraction.back(), 14.0 / 14.5, 1e-12);
 }
 
+TEST(ExactCover, ACheaperFeasibleStartReplacesGreedyAndOthersAreIgnored) {
+  // The instance greedy provably needs 3 views for. Started from the optimum {T, B} (what the plan's local
+  // search hands over), that is the warm start and the answer of record: CBC finds nothing better and proves it.
+  const auto m = matrix(14, {range(0, 7), range(7, 14), concat(range(0, 4), range(7, 11)), {4, 5, 11, 12}, {6, 13}});
+  const std::vector<double> w(14, 1.0);
+  sp::ExactReport rep;
+  const auto r = sp::exact_cover(m, w, exact(), {}, &rep, {1, 0});
+  EXPECT_EQ(rep.greedy_objective, 3.0);
+  EXPECT_EQ(rep.start_objective, 2.0);
+  EXPECT_EQ(rep.improved_solutions, 0u);
+  EXPECT_EQ(r.views, (std::vector<std::uint32_t>{0, 1}));
+  EXPECT_TRUE(rep.proven_optimal) << rep.status;
+  // A start that leaves rows 7-13 open is no cover: greedy stays the warm start.
+  sp::ExactReport open_rep;
+  EXPECT_EQ(sp::exact_cover(m, w, exact(), {}, &open_rep, {0}).views.size(), 2u);
+  EXPECT_EQ(open_rep.start_objective, 0.0);
+  // Under the registration constraint a start whose views do not overlap is no answer either: A and B of the
+  // instance below share nothing, and the connected optimum needs C.
+  const auto reg = matrix(10, {range(0, 5), range(5, 10), range(3, 7), {0, 9}});
+  sp::ExactReport reg_rep;
+  EXPECT_EQ(sp::exact_cover(reg, std::vector<double>(10, 1.0), exact(0.3), {}, &reg_rep, {0, 1}).views.size(), 3u);
+  EXPECT_EQ(reg_rep.start_objective, 0.0);
+  EXPECT_THROW(sp::exact_cover(m, w, exact(), {}, nullptr, {0, 5}), std::invalid_argument);
+}
+
+TEST(ExactCover, OverlapCountedInOtherRowsConnectsTheCover) {
+  // The registration instance below (A = rows 0-4, B = rows 5-9, C = rows 3-6 bridging them, D = {0, 9}): by
+  // its own rows the connected optimum is {A, B, C}. As a cover by footprint samples whose overlap is counted
+  // in rough-model rows (MeasurabilityMatrix::overlap), A and B both measure samples of overlap row 0, so
+  // σ(A, B) = 1 / min(1, 1) ≥ t_r and {A, B} is connected: 2 views, found by CBC in its worker process, which
+  // gets the overlap rows with the problem.
+  auto m = matrix(10, {range(0, 5), range(5, 10), range(3, 7), {0, 9}});
+  const std::vector<double> w(10, 1.0);
+  auto o = std::make_shared<sp::OverlapRows>();
+  o->matrix = matrix(2, {{0}, {0}, {1}, {1}});
+  o->weight = {1.0, 1.0};
+  m.overlap = o;
+  sp::ExactReport rep;
+  const auto r = sp::exact_cover(m, w, exact(0.3), {}, &rep);
+  EXPECT_EQ(r.views, (std::vector<std::uint32_t>{0, 1})) << rep.status;
+  EXPECT_EQ(r.registration_components, 1u);
+  EXPECT_TRUE(rep.proven_optimal) << rep.status;
+  m.overlap = nullptr;
+  EXPECT_EQ(sp::exact_cover(m, w, exact(0.3)).views.size(), 3u);
+}
+
 TEST(ExactCover, CostsChangeTheOptimum) {
   // Same instance, but T and B cost 5 each: the three greedy columns (cost 1) are now optimal.
   const auto m = matrix(14, {range(0, 7), range(7, 14), concat(range(0, 4), range(7, 11)), {4, 5, 11, 12}, {6, 13}});

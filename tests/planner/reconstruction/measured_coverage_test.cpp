@@ -12,16 +12,9 @@
 namespace scancell::planner {
 namespace {
 
-/// WholeRowSampling by its cap and area per sample alone (no crease rows).
-WholeRowSampling sampling(std::size_t max_samples, double sample_area_mm2 = 0.0) {
-  WholeRowSampling s;
-  s.max_samples = max_samples;
-  s.sample_area_mm2 = sample_area_mm2;
-  return s;
-}
-
-SensorModel thesis_sensor() { return load_sensor(testing::source_path("config/sensors/line-scan-thesis.yaml")); }
-ModelSpec thesis_spec() { return load_spec(testing::source_path("config/spec/thesis.yaml")); }
+using testing::sampling;
+using testing::thesis_sensor;
+using testing::thesis_spec;
 
 /// A view straight down onto the z = 0 plane from `height_mm`, sweeping ±L/2 along y.
 RangeImage scan_plane_from(const TriangleMesh& plane, double height_mm, double scan_length_mm) {
