@@ -63,12 +63,13 @@ std::vector<Block> make_blocks(const RoughModel& rough, double facing_limit) {
   return blocks;
 }
 
-/// Conservative: false only when no point of the sphere can be inside the frustum.
-bool sphere_may_touch_frustum(const SensorModel& s, const FrustumTerms& f, double scan_length_mm, const Eigen::Vector3d& c,
-                              double r) {
+/// Conservative: false only when no point of the sphere can be inside the frustum at a depth up to `z_max_mm`
+/// (compliant_depth_max_mm: deeper, no point meets the spec).
+bool sphere_may_touch_frustum(const SensorModel& s, const FrustumTerms& f, double scan_length_mm, double z_max_mm,
+                              const Eigen::Vector3d& c, double r) {
   const double z = -c.z();
-  if (z + r < s.range_min_mm || z - r > s.range_max_mm) return false;
-  const double zfar = z + r;
+  if (z + r < s.range_min_mm || z - r > z_max_mm) return false;
+  const double zfar = std::min(z + r, z_max_mm);
   if (std::abs(c.x()) - r > zfar * f.tan_half_x) return false;
   const double half_y = s.kind == SensorKind::line_scan ? 0.5 * scan_length_mm : zfar * f.tan_half_y;
   return std::abs(c.y()) - r <= half_y;
@@ -252,13 +253,15 @@ class ColumnWorker {
       }
       tally_.culled = n_rows - only->size();
     } else {
+      // The wide level's spec is the looser one; the full sweep's density is the lower (TestLevel::test).
+      const double z_max = compliant_depth_max_mm(lv_.wide.sensor, lv_.wide.terms, lv_.wide.spec, v.scan_length_mm);
       for (std::uint32_t b = 0; b < blocks_.size(); ++b) {
         const std::uint32_t begin = b * kBlock, end = std::min<std::uint32_t>(begin + kBlock, n_rows);
         if (r_.col(2).dot(blocks_[b].normal_axis) < blocks_[b].min_facing_dot) {  // the block faces away
           tally_.normal_culled += end - begin;
           continue;
         }
-        if (!sphere_may_touch_frustum(lv_.wide.sensor, lv_.wide.terms, v.scan_length_mm * lv_.wide.length_factor,
+        if (!sphere_may_touch_frustum(lv_.wide.sensor, lv_.wide.terms, v.scan_length_mm * lv_.wide.length_factor, z_max,
                                       rt_ * (blocks_[b].centre - v.position), blocks_[b].radius)) {
           tally_.culled += end - begin;
           continue;

@@ -166,6 +166,30 @@ inline PointTest test_point(const SensorModel& s, const FrustumTerms& f, const M
   return t;
 }
 
+/// The deepest z (mm) at which test_point can find a point compliant, whatever its normal: eq. 3.4's σz =
+/// C_z z² / cos θ_yz ≥ C_z z² bounds it by √(precision / C_z), and eq. 3.8's sample spacing (Δx ≥ z Φx / (N_x − 1),
+/// Δy ≥ L / (N_y − 1) on a line scan or z Φy / (N_y − 1)) by where 1 / (Δx² + Δy²) falls under the density.
+/// At most range_max_mm; 0 when no depth meets the density (a sweep too long for it). The matrix culls blocks
+/// beyond it (thesis sensor and spec: 317.5 mm by precision against R_max 407).
+inline double compliant_depth_max_mm(const SensorModel& s, const FrustumTerms& f, const ModelSpec& spec, double scan_length_mm) {
+  double z = s.range_max_mm;
+  if (s.noise_cz_per_mm > 0.0) z = std::min(z, std::sqrt(spec.precision_mm / s.noise_cz_per_mm));
+  if (spec.density_per_mm2 > 0.0 && s.samples_y > 1) {
+    const double spacing2 = 1.0 / spec.density_per_mm2;  // Δx² + Δy² at most
+    if (s.kind == SensorKind::line_scan) {
+      const double dy = scan_length_mm / (s.samples_y - 1);
+      const double left = spacing2 - dy * dy;
+      if (left <= 0.0) return 0.0;
+      if (f.dx_per_mm > 0.0) z = std::min(z, std::sqrt(left) / f.dx_per_mm);
+    } else {
+      const double dy_per_mm = s.fov_y_rad / (s.samples_y - 1);
+      const double per_mm2 = f.dx_per_mm * f.dx_per_mm + dy_per_mm * dy_per_mm;
+      if (per_mm2 > 0.0) z = std::min(z, std::sqrt(spacing2 / per_mm2));
+    }
+  }
+  return z;
+}
+
 /// Convenience form for tests and diagnostics: computes the sensor terms and the incidence angles.
 inline PointTest test_point(const SensorModel& s, const ModelSpec& spec, double scan_length_mm, const Eigen::Vector3d& p,
                             const Eigen::Vector3d& n) {

@@ -36,6 +36,24 @@ TEST(SensorModel, GrazingThresholdsCutTheMeasurement) {
   EXPECT_TRUE(std::isfinite(predicted_sigma_z_mm(s, {142.0, 0.0, 69 * kDeg, 0.0})));
 }
 
+TEST(SensorModel, CompliantDepthIsWherePrecisionOrDensityRunsOut) {
+  // Thesis sensor and spec (50 um, 2 samples/mm2). Precision: C_z z^2 <= 0.050 up to z = sqrt(0.050 / C_z) =
+  // 317.52 mm. Density, with a sweep of L: (z Phi_x / 255)^2 + (L / 255)^2 <= 1 / 2, so z <= 318.40 mm at
+  // L = 100, 212.34 mm at L = 150; at L = 200 the profile spacing alone (0.784 mm) is too coarse.
+  const SensorModel s = testing::thesis_sensor();
+  const ModelSpec spec = testing::thesis_spec();
+  const FrustumTerms f(s);
+  EXPECT_NEAR(compliant_depth_max_mm(s, f, spec, 100.0), 317.5217, 1e-3);
+  EXPECT_NEAR(compliant_depth_max_mm(s, f, spec, 150.0), 212.3392, 1e-3);
+  EXPECT_EQ(compliant_depth_max_mm(s, f, spec, 200.0), 0.0);
+  // The bound is tight: a surface square to the boresight passes just inside it and fails just beyond.
+  const Eigen::Vector3d up(0, 0, 1);
+  EXPECT_TRUE(test_point(s, spec, 100.0, {0, 0, -317.4}, up).compliant);
+  EXPECT_FALSE(test_point(s, spec, 100.0, {0, 0, -317.7}, up).compliant);
+  EXPECT_TRUE(test_point(s, spec, 150.0, {0, 0, -212.2}, up).compliant);
+  EXPECT_FALSE(test_point(s, spec, 150.0, {0, 0, -212.5}, up).compliant);
+}
+
 TEST(SensorModel, DensityMatchesEquation38) {
   const SensorModel s = testing::thesis_sensor();
   // δx = 142·Φx/255 = 0.262414 mm, δy = 100/255 = 0.392157 mm, ρ = 1/(δx² + δy²) = 4.49138.
