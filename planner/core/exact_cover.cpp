@@ -67,15 +67,24 @@ struct Problem {
     cols_of.assign(m->n_rows, {});
     for (std::uint32_t j = 0; j < m->n_cols(); ++j) m->columns[j].for_each([&](std::uint32_t r) { cols_of[r].push_back(j); });
     ocols_of.clear();
+    weight_of.clear();
+    max_weight = 0.0;
     if (om != m) {
       ocols_of.assign(om->n_rows, {});
       for (std::uint32_t j = 0; j < om->n_cols(); ++j) om->columns[j].for_each([&](std::uint32_t r) { ocols_of[r].push_back(j); });
     }
   }
-  double column_weight(std::uint32_t j) const {  // in what overlap is counted in
-    double s = 0.0;
-    om->columns[j].for_each([&](std::uint32_t r) { s += (*ow)[r]; });
-    return s;
+  mutable std::vector<double> weight_of;  // per column, in what overlap is counted in (filled on first use)
+  mutable double max_weight = 0.0;
+  double column_weight(std::uint32_t j) const {
+    if (weight_of.empty()) {
+      weight_of.assign(om->n_cols(), 0.0);
+      for (std::uint32_t k = 0; k < om->n_cols(); ++k) {
+        om->columns[k].for_each([&](std::uint32_t r) { weight_of[k] += (*ow)[r]; });
+        max_weight = std::max(max_weight, weight_of[k]);
+      }
+    }
+    return weight_of[j];
   }
   /// Columns k with σ(j, k) ≥ t_r, from the row -> columns index (shared weight accumulated per column).
   const std::vector<std::uint32_t>& neighbours(std::uint32_t j) const {
@@ -88,9 +97,7 @@ struct Problem {
         if (k != j) shared[k] += (*ow)[r];
     });
     const double wj = column_weight(j);
-    double ms = 0.0;
-    if (st->normalizer == RegistrationNormalizer::max_view)
-      for (std::uint32_t k = 0; k < m->n_cols(); ++k) ms = std::max(ms, column_weight(k));
+    const double ms = max_weight;  // filled by column_weight
     std::vector<std::uint32_t> out;
     for (const auto& [k, sh] : shared) {
       const double norm = st->normalizer == RegistrationNormalizer::max_view ? ms : std::min(wj, column_weight(k));

@@ -176,6 +176,24 @@ TEST(ExactCover, ImpossibleRegistrationIsReportedNotHung) {
   EXPECT_FALSE(rep.proven_optimal);
 }
 
+TEST(ExactCover, TheMaxViewNormalizerDividesByTheLargestView) {
+  // A = rows 0-4, B = rows 5-9, C = rows 3-6, D = {0, 9}. C shares 2 rows with A and with B: σ = 2 / min(5, 4)
+  // = 0.5 over the smaller view, 2 / 5 = 0.4 over the largest view (m_S, eq. 4.1). At t_r = 0.45 {A, B, C} is
+  // connected by the first and by nothing under the second: no connected cover exists.
+  const auto m = matrix(10, {range(0, 5), range(5, 10), range(3, 7), {0, 9}});
+  const std::vector<double> w(10, 1.0);
+  sp::CoverSettings smaller = exact(0.45);
+  smaller.normalizer = sp::RegistrationNormalizer::smaller_view;
+  EXPECT_EQ(sp::exact_cover(m, w, smaller).views.size(), 3u);
+  sp::CoverSettings largest = exact(0.45);
+  largest.normalizer = sp::RegistrationNormalizer::max_view;
+  sp::ExactReport rep;
+  sp::exact_cover(m, w, largest, {}, &rep);
+  EXPECT_EQ(rep.status.rfind("infeasible", 0), 0u) << rep.status;
+  largest.registration_threshold = 0.4;
+  EXPECT_EQ(sp::exact_cover(m, w, largest).registration_components, 1u);
+}
+
 TEST(ExactCover, RowsNobodyCoversAreExcludedAndReported) {
   const auto m = matrix(6, {{0, 1}, {1, 2}, {2, 3}, {0, 3}});  // rows 4 and 5: no column
   sp::ExactReport rep;
