@@ -375,12 +375,12 @@ void choose_cover(ViewPlan& p, const MeasurabilityMatrix& matrix, const std::vec
                        1e-3);
     // Started from the default cover (constrained greedy improved by the local search), so exact mode is never
     // worse than it: from greedy alone CBC's 10 s ended above it on large instances (knot1: 152 against 140).
-    CoverSettings default_cover = p.settings.cover;
-    default_cover.mode = registration_applies(p.settings.cover) ? CoverMode::constrained : CoverMode::greedy;
-    p.cover = greedy_cover(matrix, row_weight, default_cover);
+    // Greedy is the one exact cover would run itself (handed over, not run twice).
+    const CoverResult greedy = greedy_cover(matrix, row_weight, exact_greedy_settings(p.settings.cover));
+    p.cover = greedy;
     improve_by_local_search(matrix, row_weight, p);
     const std::size_t start_views = p.cover.views.size();
-    p.cover = exact_cover(matrix, row_weight, p.settings.cover, cost, &p.exact, p.cover.views);
+    p.cover = exact_cover(matrix, row_weight, p.settings.cover, cost, &p.exact, p.cover.views, &greedy);
     if (p.exact.start_objective > 0.0)
       p.cover.stop_reason += "; started from the local search's " + std::to_string(start_views) + " views";
     p.exact_used = true;

@@ -631,16 +631,27 @@ class Reader {
   std::size_t at_ = 0;
 };
 
+/// Each column's rows (the row count is written beside them).
+void put_columns(std::string& out, const MeasurabilityMatrix& m) {
+  for (const auto& c : m.columns) put_all(out, c.rows());
+}
+
+/// Reads what put_columns wrote for `n_cols` columns into `m`, whose n_rows is already set.
+void read_columns(Reader& in, MeasurabilityMatrix& m, std::uint64_t n_cols) {
+  m.columns.resize(n_cols);
+  for (auto& c : m.columns) c = MeasurabilityColumn(in.get_all<std::uint32_t>(), m.n_rows);
+}
+
 std::string encode_problem(const Problem& P, double seconds_left) {
   std::string out;
   append_binary<std::uint32_t>(out, P.m->n_rows);
   append_binary<std::uint64_t>(out, P.m->n_cols());
-  for (const auto& c : P.m->columns) put_all(out, c.rows());
+  put_columns(out, *P.m);
   put_all(out, *P.w);
   append_binary<std::uint8_t>(out, P.m->overlap ? 1 : 0);
   if (P.m->overlap) {
     append_binary<std::uint32_t>(out, P.om->n_rows);
-    for (const auto& c : P.om->columns) put_all(out, c.rows());
+    put_columns(out, *P.om);
     put_all(out, *P.ow);
   }
   append_binary<std::uint8_t>(out, static_cast<std::uint8_t>(P.st->normalizer));
@@ -666,14 +677,12 @@ int worker_main(int out_fd, const std::string&) try {
   Reader in(input);
   MeasurabilityMatrix m;
   m.n_rows = in.get<std::uint32_t>();
-  m.columns.resize(in.get<std::uint64_t>());
-  for (auto& c : m.columns) c = MeasurabilityColumn(in.get_all<std::uint32_t>(), m.n_rows);
+  read_columns(in, m, in.get<std::uint64_t>());
   const std::vector<double> w = in.get_all<double>();
   if (in.get<std::uint8_t>() != 0) {
     auto o = std::make_shared<OverlapRows>();
     o->matrix.n_rows = in.get<std::uint32_t>();
-    o->matrix.columns.resize(m.n_cols());
-    for (auto& c : o->matrix.columns) c = MeasurabilityColumn(in.get_all<std::uint32_t>(), o->matrix.n_rows);
+    read_columns(in, o->matrix, m.n_cols());
     o->weight = in.get_all<double>();
     m.overlap = std::move(o);
   }
@@ -766,24 +775,43 @@ std::string solve_in_worker(const Problem& P, Clock::time_point deadline, ExactR
   return end_status;
 }
 
+/// Which rows `views` measure, a flag per row. A column out of range throws, naming `whose` cover it is in.
+std::vector<char> rows_covered(const MeasurabilityMatrix& m, const std::vector<std::uint32_t>& views, const char* whose) {
+  std::vector<char> cov(m.n_rows, 0);
+  for (auto j : views) {
+    if (j >= m.n_cols())
+      throw std::invalid_argument(std::string("exact_cover: ") + whose + " column " + std::to_string(j) + " of " + std::to_string(m.n_cols()));
+    m.columns[j].for_each([&](std::uint32_t r) { cov[r] = 1; });
+  }
+  return cov;
+}
+
+/// Whether every row the program keeps is flagged in `cov`.
+bool covers_kept_rows(const Reduction& red, const std::vector<char>& cov) {
+  for (std::size_t r = 0; r < cov.size(); ++r)
+    if (red.row_alive[r] && !cov[r]) return false;
+  return true;
+}
+
 /// Whether `start` (original columns) covers every row the program keeps and, under the registration
 /// constraint, its overlap graph is connected.
 bool start_is_feasible(const Problem& P, const Reduction& red, const std::vector<std::uint32_t>& start) {
-  const MeasurabilityMatrix& m = *P.m;
-  std::vector<char> cov(m.n_rows, 0);
-  for (auto j : start) {
-    if (j >= m.n_cols()) throw std::invalid_argument("exact_cover: start column " + std::to_string(j) + " of " + std::to_string(m.n_cols()));
-    m.columns[j].for_each([&](std::uint32_t r) { cov[r] = 1; });
-  }
-  for (std::uint32_t r = 0; r < m.n_rows; ++r)
-    if (red.row_alive[r] && !cov[r]) return false;
-  return !P.registration || P.components(start).size() <= 1;
+  return covers_kept_rows(red, rows_covered(*P.m, start, "start")) && (!P.registration || P.components(start).size() <= 1);
 }
 
 }  // namespace
 
+CoverSettings exact_greedy_settings(const CoverSettings& st) {
+  CoverSettings gs = st;
+  gs.mode = registration_applies(st) ? CoverMode::constrained : CoverMode::greedy;
+  gs.coverage_goal = 1.0;
+  gs.eliminate_redundant = true;
+  return gs;
+}
+
 CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>& w, const CoverSettings& st,
-                        const std::vector<double>& cost_in, ExactReport* report, const std::vector<std::uint32_t>& start) {
+                        const std::vector<double>& cost_in, ExactReport* report, const std::vector<std::uint32_t>& start,
+                        const CoverResult* greedy_in) {
   const auto t0 = Clock::now();
   if (w.size() != m.n_rows) throw std::invalid_argument("exact_cover: one weight per row required");
   if (st.coverage_goal < 1.0 - 1e-12)
@@ -799,12 +827,8 @@ CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>&
     if (!(c > 0.0) || !std::isfinite(c)) throw std::invalid_argument("exact_cover: column costs must be finite and > 0");
   rep.columns = m.n_cols();
 
-  // Warm start and answer of record: greedy (constrained when registration applies), redundancy-eliminated.
-  CoverSettings gs = st;
-  gs.mode = P.registration ? CoverMode::constrained : CoverMode::greedy;
-  gs.coverage_goal = 1.0;
-  gs.eliminate_redundant = true;
-  const CoverResult greedy = greedy_cover(m, w, gs);
+  // Warm start and answer of record: greedy (constrained when registration applies), the caller's when given.
+  const CoverResult greedy = greedy_in ? *greedy_in : greedy_cover(m, w, exact_greedy_settings(st));
 
   P.index(m, w);
   Reduction red;
@@ -815,16 +839,14 @@ CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>&
   for (std::uint32_t r = 0; r < m.n_rows; ++r) red.row_alive[r] = !P.cols_of[r].empty();
   bool greedy_feasible = true;
   {
-    std::vector<char> cov(m.n_rows, 0);
-    for (auto j : greedy.views) m.columns[j].for_each([&](std::uint32_t r) { cov[r] = 1; });
+    const std::vector<char> cov = rows_covered(m, greedy.views, "greedy");
     // cover.min_view_gain_mm2: a view is not spent on less area than this, whichever cover picks it. The rows
     // greedy leaves open for that reason are left to the closed loop here too, so greedy's cover stays a
     // feasible warm start and the answer is never worse than it (without this, CBC started from nothing).
     if (st.min_view_gain > 0.0)
       for (std::uint32_t r = 0; r < m.n_rows; ++r)
         if (red.row_alive[r] && !cov[r]) red.row_alive[r] = 0, ++rep.rows_below_min_gain;
-    for (std::uint32_t r = 0; r < m.n_rows; ++r) greedy_feasible &= !red.row_alive[r] || cov[r];
-    greedy_feasible &= !P.registration || greedy.registration_components <= 1;
+    greedy_feasible = covers_kept_rows(red, cov) && (!P.registration || greedy.registration_components <= 1);
   }
   rep.rows = static_cast<std::size_t>(std::count(red.row_alive.begin(), red.row_alive.end(), 1));
   if (greedy_feasible)

@@ -46,13 +46,20 @@ struct ExactReport {
   bool proven_optimal = false;
 };
 
+/// The settings of the greedy cover exact_cover warms from: constrained when registration applies, coverage
+/// goal 1, redundant views eliminated.
+CoverSettings exact_greedy_settings(const CoverSettings& settings);
+
 /// `column_cost`: one positive cost per column (expected move time, ...), or empty for c_j = 1. `start`: a
 /// cover to start from (the local search's), the warm start and answer of record instead of greedy's when it
-/// covers every row greedy's does, registers and costs less; otherwise ignored. The result's views are
-/// ordered as greedy would take them; its stop_reason names the solver outcome. Throws ConfigError when the
-/// settings' coverage goal is below 1 (the program covers every measurable row).
+/// covers every row greedy's does, registers and costs less; otherwise ignored. `greedy`: greedy_cover of this
+/// matrix under exact_greedy_settings(settings) when the caller has it already (plan.cpp, which improves it to
+/// make `start`); otherwise it is computed here. The result's views are ordered as greedy would take them; its
+/// stop_reason names the solver outcome. Throws ConfigError when the settings' coverage goal is below 1 (the
+/// program covers every measurable row).
 CoverResult exact_cover(const MeasurabilityMatrix& m, const std::vector<double>& row_weight,
                         const CoverSettings& settings, const std::vector<double>& column_cost = {},
-                        ExactReport* report = nullptr, const std::vector<std::uint32_t>& start = {});
+                        ExactReport* report = nullptr, const std::vector<std::uint32_t>& start = {},
+                        const CoverResult* greedy = nullptr);
 
 }  // namespace scancell::planner

@@ -117,6 +117,35 @@ TEST(ExactCover, ACheaperFeasibleStartReplacesGreedyAndOthersAreIgnored) {
   EXPECT_THROW(sp::exact_cover(m, w, exact(), {}, nullptr, {0, 5}), std::invalid_argument);
 }
 
+TEST(ExactCover, TheCallersGreedyIsUsedAsGivenNotRunAgain) {
+  // plan.cpp hands over the greedy cover it improved into the start. Given a greedy of columns 2, 3, 4, 0 (the
+  // greedy cover plus T, which a rerun under exact_greedy_settings would never return: redundancy elimination
+  // drops it), its cost 4 is what exact cover reports as greedy's, and CBC still proves {T, B}.
+  const auto m = matrix(14, {range(0, 7), range(7, 14), concat(range(0, 4), range(7, 11)), {4, 5, 11, 12}, {6, 13}});
+  const std::vector<double> w(14, 1.0);
+  const auto own = sp::greedy_cover(m, w, sp::exact_greedy_settings(exact()));
+  EXPECT_EQ(own.views.size(), 3u);
+  sp::CoverResult given = own;
+  given.views.push_back(0);
+  sp::ExactReport rep;
+  const auto r = sp::exact_cover(m, w, exact(), {}, &rep, {}, &given);
+  EXPECT_EQ(rep.greedy_objective, 4.0);
+  EXPECT_EQ(r.views, (std::vector<std::uint32_t>{0, 1}));
+  EXPECT_TRUE(rep.proven_optimal) << rep.status;
+  // Without it, exact cover runs the same greedy itself: 3.
+  sp::ExactReport own_rep;
+  sp::exact_cover(m, w, exact(), {}, &own_rep);
+  EXPECT_EQ(own_rep.greedy_objective, 3.0);
+  // A handed-over greedy naming a column the matrix lacks is refused, naming it.
+  given.views.push_back(7);
+  try {
+    sp::exact_cover(m, w, exact(), {}, nullptr, {}, &given);
+    ADD_FAILURE() << "column 7 of 5 accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("greedy column 7 of 5"), std::string::npos) << e.what();
+  }
+}
+
 TEST(ExactCover, OverlapCountedInOtherRowsConnectsTheCover) {
   // The registration instance below (A = rows 0-4, B = rows 5-9, C = rows 3-6 bridging them, D = {0, 9}): by
   // its own rows the connected optimum is {A, B, C}. As a cover by footprint samples whose overlap is counted
