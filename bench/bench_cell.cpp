@@ -18,8 +18,9 @@
 // is, without the between-view registration constraint.
 // Columns: views to 95/99/99.9 % of the oracle-reachable area; the plan's views, its m_v of that area, its
 // views over the oracle's to 99 %; cell time (moves + sweeps, travel-ordered) for both. At equal completeness:
-// the oracle's views to the plan's m_v, and its own candidates' chosen greedily on the fine model (the gap
-// between that and the plan's views is the rough model's, between it and the oracle's the candidates').
+// the oracle's views to the plan's m_v of its reach; the plan's m_v of the whole fine surface and how many of
+// its own candidates, chosen greedily on the fine model, measure as much (the gap between that and the plan's
+// views is what planning on the rough model costs).
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -102,20 +103,21 @@ struct Row {
   bench::CellOracle oracle, along_normal;  // in the cell's own space; along the normals alone
   double mv_normal = 0.0, ratio_normal = 0.0;  // the plan against `along_normal`
   std::size_t oracle_to_plan = 0;              // the oracle's greedy views to the plan's m_v of its reach
-  std::size_t candidates_to_plan = 0;          // the plan's candidates', greedy on the fine model, to the same
+  std::size_t candidates_to_plan = 0;          // the plan's candidates', greedy on the fine model, to mv_whole
+  double mv_whole = 0.0;                       // the plan's m_v of the whole fine surface
 };
 
 /// How many of the columns of `m` (views judged on the fine model), taken greedily by what they measure of the
-/// oracle's reach, reach `level` of it; 0: they never do.
-std::size_t fine_greedy_views_to(const sp::MeasurabilityMatrix& m, const sp::RoughModel& fine, const bench::CellOracle& oracle,
-                                 double level) {
+/// `mask` rows, reach `level` of `mask_area_mm2`; 0: they never do.
+std::size_t fine_greedy_views_to(const sp::MeasurabilityMatrix& m, const sp::RoughModel& fine, const std::vector<std::uint8_t>& mask,
+                                 double mask_area_mm2, double level) {
   sp::CoverSettings gs;
   gs.mode = sp::CoverMode::greedy;
   gs.eliminate_redundant = false;
   std::vector<double> masked(fine.size());
-  for (std::size_t r = 0; r < fine.size(); ++r) masked[r] = oracle.reach[r] ? fine.area_mm2[r] : 0.0;
+  for (std::size_t r = 0; r < fine.size(); ++r) masked[r] = mask[r] ? fine.area_mm2[r] : 0.0;
   const auto pc = sp::greedy_cover(m, masked, gs);
-  return bench::views_to(bench::progression(m, pc.views, fine.area_mm2, oracle.reach, oracle.reach_area_mm2), level);
+  return bench::views_to(bench::progression(m, pc.views, fine.area_mm2, mask, mask_area_mm2), level);
 }
 
 /// What the plan's whole candidate set reaches on the fine model, as a share of the oracle's reach: below 1
@@ -163,13 +165,18 @@ Row judge(const sp::TriangleMesh& fine_mesh, const std::optional<sp::CellModel>&
   row.mv_normal = mv_of(row.along_normal);
   row.ratio_normal = row.along_normal.views_99 ? double(plan.views.size()) / row.along_normal.views_99 : std::nan("");
   // The plan's views the fine model needs for 99 % (the rest of the plan chases the rough model's last rows).
-  row.plan99 = fine_greedy_views_to(pm, fine, row.oracle, 0.99);
+  row.plan99 = fine_greedy_views_to(pm, fine, row.oracle.reach, row.oracle.reach_area_mm2, 0.99);
   row.oracle_to_plan = bench::views_to(row.oracle.progression, row.mv);
   const auto cm = sp::build_measurability(fine, scene, sensor, spec, plan.candidate_views);
   row.cand_reach = candidate_reach(cm, fine, row.oracle);
-  // The plan's own candidates chosen knowing the fine surface: above the oracle's count the candidates lack views
-  // the oracle has; between it and the plan's count, the cover chose by the rough model's estimate.
-  row.candidates_to_plan = fine_greedy_views_to(cm, fine, row.oracle, row.mv);
+  // The plan's own candidates chosen knowing the fine surface, to as much of the whole surface as the plan
+  // measures (it measures some the oracle cannot reach: counted by the reach alone, its views there would
+  // read as waste). Above the oracle's count the candidates lack views the oracle has; between it and the
+  // plan's count, the cover chose by the rough model's estimate.
+  const std::vector<std::uint8_t> whole(fine.size(), 1);
+  const auto whole_prog = bench::progression(pm, all, fine.area_mm2, whole, row.oracle.total_area_mm2);
+  row.mv_whole = whole_prog.empty() ? 0.0 : whole_prog.back();
+  row.candidates_to_plan = fine_greedy_views_to(cm, fine, whole, row.oracle.total_area_mm2, row.mv_whole);
   row.est = plan.cover.cumulative_fraction.empty() ? 0.0 : plan.cover.cumulative_fraction.back();
   row.plan_t = plan.cell ? plan.cell_report.travel_s + plan.cell_report.scan_s : std::nan("");
   row.cell_name = cell ? cell->name : "free";
@@ -186,12 +193,12 @@ void print_row(const std::string& object, const Row& r) {
   std::printf("%-16s %-20s %6zu %6.3f %4zu/%4zu/%4zu %6zu %6zu %8.4f %8.4f %6.2f %7.1f %10.0f %10.0f  est %.4f  plan_to_99 %zu  "
               "lost: range/incidence %.4f plate %.4f axes %.4f collision %.4f  "
               "stages s: rough %.2f viewpoints %.2f matrix %.2f (samples %.2f) cover %.2f  along normals: reach %.3f views %zu/%zu/%zu m_v_rch %.4f ratio %.2f  "
-              "oracle views to the plan's m_v %zu, its candidates' %zu  rows nothing measured first %zu, aims %zu (and %zu closed), views %zu\n",
+              "oracle views to the plan's m_v %zu  m_v of the whole surface %.4f, its candidates' views to it %zu  rows nothing measured first %zu, aims %zu (and %zu closed), views %zu\n",
               object.c_str(), r.cell_name.c_str(), r.fine_vertices, r.reach, c.views_95, c.views_99, c.views_999, r.candidates,
               r.views, r.cand_reach, r.mv, r.ratio, r.plan_s, r.plan_t, c.cell_time_s, r.est, r.plan99, c.lost_range,
               c.lost_plate, c.lost_axes, c.lost_collision, r.stages.rough_model_s, r.stages.viewpoints_s, r.stages.matrix_s,
               r.stages.matrix_samples_s, r.stages.cover_s, r.along_normal.reachable(), r.along_normal.views_95, r.along_normal.views_99,
-              r.along_normal.views_999, r.mv_normal, r.ratio_normal, r.oracle_to_plan, r.candidates_to_plan, r.rows_unmeasurable, r.self_aims, r.self_closed, r.self_candidates);
+              r.along_normal.views_999, r.mv_normal, r.ratio_normal, r.oracle_to_plan, r.mv_whole, r.candidates_to_plan, r.rows_unmeasurable, r.self_aims, r.self_closed, r.self_candidates);
   std::fflush(stdout);
 }
 
@@ -201,7 +208,7 @@ void csv_row(std::ofstream& csv, const std::string& object, const Row& r) {
       << c.views_999 << ',' << r.views << ',' << r.mv << ',' << r.ratio << ',' << r.plan_s << ',' << r.plan_t << ','
       << c.cell_time_s << ',' << r.cand_reach << ',' << c.lost_range << ',' << c.lost_plate << ',' << c.lost_axes << ','
       << c.lost_collision << ',' << r.along_normal.reachable() << ',' << r.along_normal.views_99 << ',' << r.mv_normal << ','
-      << r.ratio_normal << ',' << r.oracle_to_plan << ',' << r.candidates_to_plan << '\n';
+      << r.ratio_normal << ',' << r.oracle_to_plan << ',' << r.mv_whole << ',' << r.candidates_to_plan << '\n';
 }
 
 }  // namespace
@@ -226,7 +233,7 @@ int main(int argc, char** argv) {
     csv << "object,cell,fine_vertices,reachable,oracle_views_95,oracle_views_99,oracle_views_99.9,plan_views,"
            "plan_m_v_reachable,plan_over_oracle_99,plan_s,plan_cell_time_s,oracle_cell_time_s,candidates_reach,"
            "lost_range_incidence,lost_plate,lost_axes,lost_collision,normal_oracle_reachable,normal_oracle_views_99,"
-           "plan_m_v_normal_reachable,plan_over_normal_oracle_99,oracle_views_to_plan_m_v,candidate_views_to_plan_m_v\n";
+           "plan_m_v_normal_reachable,plan_over_normal_oracle_99,oracle_views_to_plan_m_v,plan_m_v_whole,candidate_views_to_plan_m_v_whole\n";
   }
   std::printf("sensor %s, spec %.3f mm / %.1f samples/mm2, rough %zu vertices, oracle 1 per %d fine vertices, "
               "%d threads\n",
