@@ -20,7 +20,8 @@
 // views over the oracle's to 99 %; cell time (moves + sweeps, travel-ordered) for both. At equal completeness:
 // the oracle's views to the plan's m_v of its reach; the plan's m_v of the whole fine surface and how many of
 // its own candidates, chosen greedily on the fine model, measure as much (the gap between that and the plan's
-// views is what planning on the rough model costs).
+// views is what planning on the rough model costs); how many of the plan's views the fine surface does not
+// need (each measures no more than cover.min_view_gain_mm2 that the others do not).
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -28,6 +29,7 @@
 #include <fstream>
 #include <functional>
 #include <iostream>
+#include <limits>
 #include <numbers>
 #include <optional>
 #include <set>
@@ -105,6 +107,7 @@ struct Row {
   std::size_t oracle_to_plan = 0;              // the oracle's greedy views to the plan's m_v of its reach
   std::size_t candidates_to_plan = 0;          // the plan's candidates', greedy on the fine model, to mv_whole
   double mv_whole = 0.0;                       // the plan's m_v of the whole fine surface
+  std::size_t unneeded_on_fine = 0;            // plan views the fine surface does not need (views_unneeded_on_fine)
 };
 
 /// How many of the columns of `m` (views judged on the fine model), taken greedily by what they measure of the
@@ -118,6 +121,28 @@ std::size_t fine_greedy_views_to(const sp::MeasurabilityMatrix& m, const sp::Rou
   for (std::size_t r = 0; r < fine.size(); ++r) masked[r] = mask[r] ? fine.area_mm2[r] : 0.0;
   const auto pc = sp::greedy_cover(m, masked, gs);
   return bench::views_to(bench::progression(m, pc.views, fine.area_mm2, mask, mask_area_mm2), level);
+}
+
+/// How many of the plan's views (columns of `pm`, judged on the fine model) the fine surface does not need:
+/// taken away one at a time, the view that alone measures least of the whole surface among those kept, while
+/// that is at most `min_gain_mm2` (cover.min_view_gain_mm2, what a view must gain to be planned at all).
+std::size_t views_unneeded_on_fine(const sp::MeasurabilityMatrix& pm, const sp::RoughModel& fine, double min_gain_mm2) {
+  std::vector<std::uint32_t> seen_by(fine.size(), 0);
+  for (const auto& c : pm.columns) c.for_each([&](std::uint32_t r) { ++seen_by[r]; });
+  std::vector<char> kept(pm.n_cols(), 1);
+  for (std::size_t removed = 0;; ++removed) {
+    double least = std::numeric_limits<double>::infinity();
+    std::size_t at = 0;
+    for (std::size_t j = 0; j < pm.n_cols(); ++j) {
+      if (!kept[j]) continue;
+      double alone = 0.0;
+      pm.columns[j].for_each([&](std::uint32_t r) { alone += seen_by[r] == 1 ? fine.area_mm2[r] : 0.0; });
+      if (alone < least) least = alone, at = j;
+    }
+    if (!(least <= min_gain_mm2)) return removed;
+    kept[at] = 0;
+    pm.columns[at].for_each([&](std::uint32_t r) { --seen_by[r]; });
+  }
 }
 
 /// What the plan's whole candidate set reaches on the fine model, as a share of the oracle's reach: below 1
@@ -177,6 +202,7 @@ Row judge(const sp::TriangleMesh& fine_mesh, const std::optional<sp::CellModel>&
   const auto whole_prog = bench::progression(pm, all, fine.area_mm2, whole, row.oracle.total_area_mm2);
   row.mv_whole = whole_prog.empty() ? 0.0 : whole_prog.back();
   row.candidates_to_plan = fine_greedy_views_to(cm, fine, whole, row.oracle.total_area_mm2, row.mv_whole);
+  row.unneeded_on_fine = views_unneeded_on_fine(pm, fine, settings.cover.min_view_gain);
   row.est = plan.cover.cumulative_fraction.empty() ? 0.0 : plan.cover.cumulative_fraction.back();
   row.plan_t = plan.cell ? plan.cell_report.travel_s + plan.cell_report.scan_s : std::nan("");
   row.cell_name = cell ? cell->name : "free";
@@ -193,12 +219,12 @@ void print_row(const std::string& object, const Row& r) {
   std::printf("%-16s %-20s %6zu %6.3f %4zu/%4zu/%4zu %6zu %6zu %8.4f %8.4f %6.2f %7.1f %10.0f %10.0f  est %.4f  plan_to_99 %zu  "
               "lost: range/incidence %.4f plate %.4f axes %.4f collision %.4f  "
               "stages s: rough %.2f viewpoints %.2f matrix %.2f (samples %.2f) cover %.2f  along normals: reach %.3f views %zu/%zu/%zu m_v_rch %.4f ratio %.2f  "
-              "oracle views to the plan's m_v %zu  m_v of the whole surface %.4f, its candidates' views to it %zu  rows nothing measured first %zu, aims %zu (and %zu closed), views %zu\n",
+              "oracle views to the plan's m_v %zu  m_v of the whole surface %.4f, its candidates' views to it %zu  plan views the fine surface does not need %zu  rows nothing measured first %zu, aims %zu (and %zu closed), views %zu\n",
               object.c_str(), r.cell_name.c_str(), r.fine_vertices, r.reach, c.views_95, c.views_99, c.views_999, r.candidates,
               r.views, r.cand_reach, r.mv, r.ratio, r.plan_s, r.plan_t, c.cell_time_s, r.est, r.plan99, c.lost_range,
               c.lost_plate, c.lost_axes, c.lost_collision, r.stages.rough_model_s, r.stages.viewpoints_s, r.stages.matrix_s,
               r.stages.matrix_samples_s, r.stages.cover_s, r.along_normal.reachable(), r.along_normal.views_95, r.along_normal.views_99,
-              r.along_normal.views_999, r.mv_normal, r.ratio_normal, r.oracle_to_plan, r.mv_whole, r.candidates_to_plan, r.rows_unmeasurable, r.self_aims, r.self_closed, r.self_candidates);
+              r.along_normal.views_999, r.mv_normal, r.ratio_normal, r.oracle_to_plan, r.mv_whole, r.candidates_to_plan, r.unneeded_on_fine, r.rows_unmeasurable, r.self_aims, r.self_closed, r.self_candidates);
   std::fflush(stdout);
 }
 
@@ -208,7 +234,7 @@ void csv_row(std::ofstream& csv, const std::string& object, const Row& r) {
       << c.views_999 << ',' << r.views << ',' << r.mv << ',' << r.ratio << ',' << r.plan_s << ',' << r.plan_t << ','
       << c.cell_time_s << ',' << r.cand_reach << ',' << c.lost_range << ',' << c.lost_plate << ',' << c.lost_axes << ','
       << c.lost_collision << ',' << r.along_normal.reachable() << ',' << r.along_normal.views_99 << ',' << r.mv_normal << ','
-      << r.ratio_normal << ',' << r.oracle_to_plan << ',' << r.mv_whole << ',' << r.candidates_to_plan << '\n';
+      << r.ratio_normal << ',' << r.oracle_to_plan << ',' << r.mv_whole << ',' << r.candidates_to_plan << ',' << r.unneeded_on_fine << '\n';
 }
 
 }  // namespace
@@ -233,7 +259,7 @@ int main(int argc, char** argv) {
     csv << "object,cell,fine_vertices,reachable,oracle_views_95,oracle_views_99,oracle_views_99.9,plan_views,"
            "plan_m_v_reachable,plan_over_oracle_99,plan_s,plan_cell_time_s,oracle_cell_time_s,candidates_reach,"
            "lost_range_incidence,lost_plate,lost_axes,lost_collision,normal_oracle_reachable,normal_oracle_views_99,"
-           "plan_m_v_normal_reachable,plan_over_normal_oracle_99,oracle_views_to_plan_m_v,plan_m_v_whole,candidate_views_to_plan_m_v_whole\n";
+           "plan_m_v_normal_reachable,plan_over_normal_oracle_99,oracle_views_to_plan_m_v,plan_m_v_whole,candidate_views_to_plan_m_v_whole,plan_views_unneeded_on_fine\n";
   }
   std::printf("sensor %s, spec %.3f mm / %.1f samples/mm2, rough %zu vertices, oracle 1 per %d fine vertices, "
               "%d threads\n",

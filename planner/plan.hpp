@@ -55,7 +55,7 @@ struct ViewPlan {
   std::size_t candidates = 0;
   std::size_t segments = 0;  // labelled surface patches of the rough model
   /// Rows predicted by footprint samples instead of their vertex (a replan's open rows, or a single shot's
-  /// crease rows when the cover does not apply the registration constraint); 0: all by the vertex.
+  /// crease rows and, on a cell, its rows of matrix.cell_footprint_sample_area_mm2); 0: all by the vertex.
   std::size_t rows_by_footprint_samples = 0;
   double matrix_density = 0.0;
   std::size_t matrix_bytes = 0;
