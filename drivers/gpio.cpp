@@ -185,7 +185,10 @@ void Interlock::watch(DigitalInput& in, const std::string& name, bool active_lev
   while (running_) {
     const auto edge = in.wait_edge(std::chrono::milliseconds(20));
     if (!edge || *edge != active_level) continue;
-    // Halt first, record after: the halt is what must not wait.
+    // Halt first, record after: the halt is what must not wait (only a reset in progress, which sets a flag,
+    // holds `latching_`). A reset waits for the halts and their record: without that it could clear the latch
+    // while halt_all still went over the bus and be journalled before the press it answers (CI, under load).
+    std::lock_guard<std::mutex> latch(latching_);
     const auto errors = positioner_.latch_estop(name);
     std::lock_guard<std::mutex> lock(mu_);
     events_.push_back(name + " active: all axes halted, motion latched off");
@@ -194,6 +197,7 @@ void Interlock::watch(DigitalInput& in, const std::string& name, bool active_lev
 }
 
 void Interlock::reset() {
+  std::lock_guard<std::mutex> latch(latching_);
   if (estop_.get() == estop_high_)
     throw DriverError(DriverError::Kind::refused, "interlock", "reset", "e-stop still active");
   positioner_.reset_estop();

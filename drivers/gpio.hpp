@@ -129,6 +129,7 @@ class Interlock {
   bool estop_high_;
   std::atomic<bool> running_{true};
   std::vector<std::thread> threads_;
+  std::mutex latching_;  // held from a latch's halt to its record, and by reset(): a reset never interleaves with one
   mutable std::mutex mu_;
   std::vector<std::string> events_;
 };

@@ -143,6 +143,64 @@ TEST(Interlock, EstopHaltsEveryAxisAtOnceAndLatchesUntilReset) {
   EXPECT_THAT(interlock.events().front(), HasSubstr("e-stop active"));
 }
 
+namespace {
+
+/// An axis whose halt takes until the test lets it finish: a drive answering slowly on its bus.
+class SlowHaltAxis : public dr::Axis {
+ public:
+  const std::string& name() const override { return name_; }
+  void enable() override {}
+  void disable() override {}
+  void home(std::chrono::milliseconds) override {}
+  void begin_move(double, double) override {}
+  void finish_move(double, std::chrono::milliseconds) override {}
+  void stop() override {}
+  void halt() override {
+    halting = true;
+    for (int k = 0; k < 2000 && !release; ++k) std::this_thread::sleep_for(1ms);
+    halted = true;
+  }
+  void reset_fault() override {}
+  dr::AxisState state() override { return {}; }
+  std::atomic<bool> halting{false}, release{false}, halted{false};
+
+ private:
+  std::string name_ = "slow";
+};
+
+}  // namespace
+
+TEST(Interlock, AResetWaitsForTheHaltsOfThePressItAnswers) {
+  // The e-stop is pressed and released while the axis is still taking its halt; a reset then must not clear
+  // the latch before the halt is done, nor be journalled before the press (it once was, under load in CI).
+  dr::Positioner pos;
+  auto slow = std::make_unique<SlowHaltAxis>();
+  SlowHaltAxis& axis = *slow;
+  pos.add(std::move(slow), {-500, 500});
+  dr::SimInput estop(false);
+  dr::Interlock interlock(estop, nullptr, pos);
+  estop.drive(true);
+  for (int k = 0; k < 2000 && !axis.halting; ++k) std::this_thread::sleep_for(1ms);
+  ASSERT_TRUE(axis.halting) << "no halt within 2 s of the e-stop";
+  estop.drive(false);
+  std::atomic<bool> reset_done{false};
+  std::thread resetter([&] {
+    interlock.reset();
+    reset_done = true;
+  });
+  std::this_thread::sleep_for(100ms);
+  EXPECT_FALSE(reset_done) << "the reset returned while the halt was still going out";
+  EXPECT_TRUE(interlock.latched());
+  axis.release = true;
+  resetter.join();
+  EXPECT_TRUE(axis.halted);
+  EXPECT_FALSE(interlock.latched());
+  const auto events = interlock.events();
+  ASSERT_EQ(events.size(), 2u);
+  EXPECT_THAT(events[0], HasSubstr("e-stop active"));
+  EXPECT_EQ(events[1], "reset");
+}
+
 TEST(SimScanner, OneProfilePerTriggerPulseAtTheAxesPose) {
   // A plane at z = 0; the camera 200 mm above looking down, swept 0.5 mm along its y per pulse (the sweep
   // axis): every pulse gives a profile of N_x samples on the plane, at the sweep position of that pulse.
