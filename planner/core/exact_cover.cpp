@@ -57,7 +57,11 @@ struct Problem {
   std::vector<std::vector<std::uint32_t>> ocols_of;  // overlap row -> columns, when om is not m
   mutable std::unordered_map<std::uint32_t, std::vector<std::uint32_t>> neighbours_cache;
 
-  /// Sets m and w, what overlap is counted in, and the row -> columns indices.
+  std::vector<double> weight_of;  // per column, what it measures in what overlap is counted in (registration only)
+  double max_weight = 0.0;        // the largest of weight_of: the max_view normalizer of σ
+
+  /// Sets m and w, what overlap is counted in, the row -> columns indices and, when the registration constraint
+  /// applies (set `registration` first), each column's weight for σ.
   void index(const MeasurabilityMatrix& matrix, const std::vector<double>& weight) {
     m = &matrix;
     w = &weight;
@@ -67,26 +71,21 @@ struct Problem {
     cols_of.assign(m->n_rows, {});
     for (std::uint32_t j = 0; j < m->n_cols(); ++j) m->columns[j].for_each([&](std::uint32_t r) { cols_of[r].push_back(j); });
     ocols_of.clear();
-    weight_of.clear();
-    max_weight = 0.0;
     if (om != m) {
       ocols_of.assign(om->n_rows, {});
       for (std::uint32_t j = 0; j < om->n_cols(); ++j) om->columns[j].for_each([&](std::uint32_t r) { ocols_of[r].push_back(j); });
     }
-  }
-  mutable std::vector<double> weight_of;  // per column, in what overlap is counted in (filled on first use)
-  mutable double max_weight = 0.0;
-  double column_weight(std::uint32_t j) const {
-    if (weight_of.empty()) {
-      weight_of.assign(om->n_cols(), 0.0);
-      for (std::uint32_t k = 0; k < om->n_cols(); ++k) {
-        om->columns[k].for_each([&](std::uint32_t r) { weight_of[k] += (*ow)[r]; });
-        max_weight = std::max(max_weight, weight_of[k]);
-      }
+    weight_of.clear();
+    max_weight = 0.0;
+    if (!registration) return;
+    weight_of.assign(om->n_cols(), 0.0);
+    for (std::uint32_t k = 0; k < om->n_cols(); ++k) {
+      om->columns[k].for_each([&](std::uint32_t r) { weight_of[k] += (*ow)[r]; });
+      max_weight = std::max(max_weight, weight_of[k]);
     }
-    return weight_of[j];
   }
-  /// Columns k with σ(j, k) ≥ t_r, from the row -> columns index (shared weight accumulated per column).
+  /// Columns k with σ(j, k) ≥ t_r, from the row -> columns index (shared weight accumulated per column); only
+  /// where the registration constraint applies, which is what index() weighs the columns for.
   const std::vector<std::uint32_t>& neighbours(std::uint32_t j) const {
     auto it = neighbours_cache.find(j);
     if (it != neighbours_cache.end()) return it->second;
@@ -96,11 +95,9 @@ struct Problem {
       for (auto k : index_of[r])
         if (k != j) shared[k] += (*ow)[r];
     });
-    const double wj = column_weight(j);
-    const double ms = max_weight;  // filled by column_weight
     std::vector<std::uint32_t> out;
     for (const auto& [k, sh] : shared) {
-      const double norm = st->normalizer == RegistrationNormalizer::max_view ? ms : std::min(wj, column_weight(k));
+      const double norm = st->normalizer == RegistrationNormalizer::max_view ? max_weight : std::min(weight_of[j], weight_of[k]);
       if (norm > 0.0 && sh > 0.0 && sh / norm >= st->registration_threshold) out.push_back(k);
     }
     std::sort(out.begin(), out.end());
