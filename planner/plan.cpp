@@ -338,11 +338,9 @@ MeasurabilityMatrix make_matrix(const Stage& s, const OcclusionScene& scene, con
   p.generation.open_direction_candidates = extra.size();
   // These views work far out, near the precision and density limits, where a rough model's averaged
   // normals make the estimate least reliable: their columns claim only rows measured with a margin
-  // (a detuned test, thesis 7.4.7; 10 % was the best of 0, 10 and 25 % in bench_quality).
-  ModelSpec detuned = s.spec;
-  detuned.precision_mm /= 1.1;
-  detuned.density_per_mm2 *= 1.1;
-  append_candidates(s, scene, detuned, std::move(extra), matrix, candidates);
+  // (open_direction_spec; 10 % was the best of 0, 10 and 25 % in bench_quality).
+  append_candidates(s, scene, open_direction_spec(s.spec, s.settings.matrix.countermeasures), std::move(extra), matrix,
+                    candidates);
   return matrix;
 }
 

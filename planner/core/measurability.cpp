@@ -161,6 +161,11 @@ ModelSpec detuned_spec(const ModelSpec& spec, const Countermeasures& c) {
   return s;
 }
 
+ModelSpec open_direction_spec(const ModelSpec& spec, const Countermeasures& matrix_cm) {
+  const double left = (1.0 + kOpenDirectionComplianceMargin) / (1.0 + matrix_cm.compliance_buffer);
+  return left > 1.0 ? detuned_spec(spec, Countermeasures{0.0, 0.0, left - 1.0, 0.0}) : spec;
+}
+
 MeasurabilityColumn::MeasurabilityColumn(std::vector<std::uint32_t> sorted_rows, std::uint32_t n_rows)
     : count_(static_cast<std::uint32_t>(sorted_rows.size())) {
   const std::size_t words = (n_rows + 63) / 64;

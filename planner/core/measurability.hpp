@@ -100,6 +100,16 @@ struct Countermeasures {
 SensorModel detuned_sensor(const SensorModel& sensor, const Countermeasures& c);
 ModelSpec detuned_spec(const ModelSpec& spec, const Countermeasures& c);
 
+/// The compliance margin open-direction views' columns claim rows with (thesis 7.4.7): they work far out, near
+/// the precision and density limits, where the rough model's averaged normals mislead most (docs/planner.md).
+inline constexpr double kOpenDirectionComplianceMargin = 0.1;
+
+/// The spec those columns are built with, under a matrix whose own countermeasures are `matrix_cm`: tightened by
+/// the margin only as far as the matrix's compliance buffer does not already tighten it. The free-space margin
+/// holds every column to σz ≤ spec/1.1; stacked on it, these views were held to spec/1.21 and left rows to
+/// other views (couplingdown in free space 212 -> 198 views, m_v of the reach 0.9943 -> 0.9949; docs/quality.md).
+ModelSpec open_direction_spec(const ModelSpec& spec, const Countermeasures& matrix_cm);
+
 struct MatrixSettings {
   /// Occlusion rays start this far off the surface along the normal, and stop this short of the sensor.
   /// Zero means: 1 % of the rough model's mean edge length.

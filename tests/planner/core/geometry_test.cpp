@@ -247,6 +247,29 @@ TEST(Geometry, TheMarginsNearMissRaysAndThePlainElementsComeFromOnePass) {
   EXPECT_THROW(build_measurability(rm, scene, sensor, spec, cands, tight, nullptr, nullptr, &wrong), std::invalid_argument);
 }
 
+TEST(Geometry, OpenDirectionViewsClaimRowsWithTheMarginOnce) {
+  // Thesis spec: σz ≤ 0.05 mm, ρ ≥ 2 samples/mm². The 10 % margin alone: 0.05 / 1.1 and 2.2.
+  const ModelSpec spec = testing::thesis_spec();
+  ASSERT_DOUBLE_EQ(spec.precision_mm, 0.05);
+  ASSERT_DOUBLE_EQ(spec.density_per_mm2, 2.0);
+  const ModelSpec alone = open_direction_spec(spec, {});
+  EXPECT_NEAR(alone.precision_mm, 0.05 / 1.1, 1e-12);
+  EXPECT_NEAR(alone.density_per_mm2, 2.2, 1e-12);
+  // Under the free-space margin (the matrix already holds every column to σz ≤ spec/1.1) it adds nothing: the
+  // matrix applies its own buffer on top of what it is given, and the two together must still be 1.1, not 1.21.
+  auto as_built = [&](double buffer) {
+    Countermeasures cm;
+    cm.compliance_buffer = buffer;
+    return detuned_spec(open_direction_spec(spec, cm), cm);
+  };
+  EXPECT_NEAR(as_built(0.1).precision_mm, 0.05 / 1.1, 1e-12);
+  EXPECT_NEAR(as_built(0.1).density_per_mm2, 2.2, 1e-12);
+  // A smaller buffer is topped up to the margin; a larger one is not loosened.
+  EXPECT_NEAR(as_built(0.05).precision_mm, 0.05 / 1.1, 1e-12);
+  EXPECT_NEAR(as_built(0.25).precision_mm, 0.05 / 1.25, 1e-12);
+  EXPECT_NEAR(as_built(0.25).density_per_mm2, 2.5, 1e-12);
+}
+
 TEST(Geometry, ViewpointPositionsFollowTheFootprintNotTheMeshDensity) {
   // A 40 mm sphere sampled finely: d_v = 4 alone would give a position every 4 rows. The footprint of the
   // thesis sensor at R_o = 142 mm is 2·142·tan(13.5°) = 68.18 mm wide; at 0.07 of it (4.773 mm) positions
