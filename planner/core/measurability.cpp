@@ -163,7 +163,7 @@ ModelSpec detuned_spec(const ModelSpec& spec, const Countermeasures& c) {
 
 ModelSpec open_direction_spec(const ModelSpec& spec, const Countermeasures& matrix_cm) {
   const double left = (1.0 + kOpenDirectionComplianceMargin) / (1.0 + matrix_cm.compliance_buffer);
-  return left > 1.0 ? detuned_spec(spec, Countermeasures{0.0, 0.0, left - 1.0, 0.0}) : spec;
+  return left > 1.0 ? detuned_spec(spec, Countermeasures{.compliance_buffer = left - 1.0}) : spec;
 }
 
 MeasurabilityColumn::MeasurabilityColumn(std::vector<std::uint32_t> sorted_rows, std::uint32_t n_rows)
