@@ -223,8 +223,11 @@ void read_placement(Section s, PlacementSettings& pl) {
 
 void read_matrix(Section m, PlannerSettings& p) {
   p.matrix.ray_offset_mm = m.non_negative("ray_offset_mm", p.matrix.ray_offset_mm);
-  p.cell_footprint_samples = m.ranged("cell_footprint_samples", p.cell_footprint_samples, 0, 64);
-  p.cell_footprint_sample_area_mm2 = m.ranged("cell_footprint_sample_area_mm2", p.cell_footprint_sample_area_mm2, 0.0, 1000.0);
+  for (const char* old : {"cell_footprint_samples", "cell_footprint_sample_area_mm2"})
+    if (m.has(old))  // session 41: they apply in free space too (config.hpp)
+      m.fail(m.key_path(old), std::string("was renamed matrix.") + (old + 5) + " (it now applies in free space too)");
+  p.footprint_samples = m.ranged("footprint_samples", p.footprint_samples, 0, 64);
+  p.footprint_sample_area_mm2 = m.ranged("footprint_sample_area_mm2", p.footprint_sample_area_mm2, 0.0, 1000.0);
   p.crease_footprint_samples = m.ranged("crease_footprint_samples", p.crease_footprint_samples, 0, 64);
   p.crease_angle_rad = m.ranged("crease_angle_rad", p.crease_angle_rad, 0.1, std::numbers::pi / 2);
   if (m.has("countermeasures")) {

@@ -35,32 +35,40 @@ struct PlannerSettings {
   /// matrix.countermeasures: auto — size them from the cell's pose-error model (tables 7.3-7.5); needs a cell.
   bool countermeasures_from_cell = false;
   /// matrix.free_space_countermeasures: a margin against the rough model's own error, for plans without a cell
-  /// (merged, field by field the larger, with matrix.countermeasures). The rough model is the fine surface
-  /// decimated: its normals and sightlines are right at its own resolution, so an element at the edge of the
-  /// spec (σz or ρ just inside it, a ray grazing past a neighbour) often fails on the fine surface. In free
-  /// space that edge is what the view-minimal cover keeps (docs/quality.md: m_v of the reachable area 0.982
-  /// on knot1 and couplingdown, 0.989 on rotor without it). On a cell the plate and the axes limit m_v instead
-  /// and the closed loop takes the rest: the same margin there cost 5-25 % more views for no m_v.
+  /// (merged, field by field the larger, with matrix.countermeasures): σz ≤ spec/(1 + b), ρ ≥ (1 + b)·spec and
+  /// displaced rays. The view-minimal cover keeps the elements at the edge of the spec, and where the rough
+  /// model errs many of them fail on the fine surface (docs/quality.md: m_v of the reachable area 0.982 on
+  /// knot1 and couplingdown, 0.989 on rotor without any guard). Since session 41 it applies only where
+  /// footprint_samples do not stand in for it: on a rough model that carries noise (σ_rm, thesis 5.4), whose
+  /// triangles err at random too, or with footprint_samples 0 (choose_free_space_guard in plan.cpp). On a
+  /// noise-free rough model the samples model its error where it is: free space 717 views with the margin,
+  /// 537 with the samples, m_v of the reach ≥ 0.99 on 10 of 10 either way (the box with a blind hole 53 → 35
+  /// views at 0.993). On a cell the plate and the axes limit m_v instead and the closed loop takes the rest:
+  /// the same margin there cost 5-25 % more views for no m_v.
   Countermeasures free_space_countermeasures;
-  /// matrix.cell_footprint_samples: on a cell, a plan that is not a replan predicts each row by up to this many
-  /// samples of its footprint (the cells the closed loop measures it by, planner/core/footprint.hpp) instead
-  /// of by its vertex; 0: by the vertex (thesis 3.3). A row whose footprint reaches past what a view sees (a
-  /// rim by the plate, the side of a cleft) is then known before a view is spent on it, which is what the
-  /// cell oracle, aiming at fine vertices, knows (docs/quality.md: on the turntable cell knot1's single shot
-  /// measures 0.9777 of the reach in 149 views by the vertex, 0.9880 in 175 by 8 samples). 0 here, 4 in
-  /// config/planner/default.yaml (session 36).
-  int cell_footprint_samples = 0;
-  /// matrix.cell_footprint_sample_area_mm2: with cell_footprint_samples, one sample per this much of a row's
+  /// matrix.footprint_samples: a plan that is not a replan, on a cell or in free space (there unless
+  /// free_space_countermeasures applies, on a rough model with noise), predicts each row by
+  /// up to this many samples of its footprint (the cells the closed loop measures it by,
+  /// planner/core/footprint.hpp) instead of by its vertex; 0: by the vertex (thesis 3.3). A row whose
+  /// footprint reaches past what a view sees (a rim by the plate, the side of a cleft, the far side of a bend
+  /// its vertex normal averages away) is then known before a view is spent on it, which is what the oracle,
+  /// aiming at fine vertices, knows (docs/quality.md: on the turntable cell knot1's single shot measures
+  /// 0.9777 of the reach in 149 views by the vertex, 0.9880 in 175 by 8 samples; in free space, on a rough
+  /// model without noise, where they replace free_space_countermeasures since session 41, knot1 0.9929 in
+  /// 102 views against 0.9963 in 135 with the margin and 0.9850 in 92 with neither). 0 here, 4 in
+  /// config/planner/default.yaml (cell: session 36).
+  int footprint_samples = 0;
+  /// matrix.footprint_sample_area_mm2: with footprint_samples, one sample per this much of a row's
   /// area, up to that many; a row under two samples' worth is predicted by its vertex (a crease row by
   /// crease_footprint_samples still). A vertex mispredicts a band about as wide as its row, so rows already
   /// that fine gain nothing from samples, and a mesh planned as given pays for them per row (docs/quality.md:
-  /// 26k rows on the turntable 15.7 s with 4 each, 9.1 s at 4 mm²). 0 here: every row cell_footprint_samples;
+  /// 26k rows on the turntable 15.7 s with 4 each, 9.1 s at 4 mm²). 0 here: every row footprint_samples;
   /// 4 in config/planner/default.yaml (session 36).
-  double cell_footprint_sample_area_mm2 = 0.0;
+  double footprint_sample_area_mm2 = 0.0;
   /// matrix.crease_footprint_samples / crease_angle_rad: a plan that is not a replan predicts the rows on a
   /// crease (crease_rows: a triangle more than crease_angle_rad from the row's normal) by up to this many
-  /// footprint samples, each with its own triangle's normal (in free space and, when cell_footprint_samples
-  /// is 0 or leaves the row to its vertex, on a cell); 0: by the vertex. A crease row's bisector normal (a box's edge, a hole's rim, a
+  /// footprint samples, each with its own triangle's normal (when footprint_samples is 0 or leaves the
+  /// row to its vertex); 0: by the vertex. A crease row's bisector normal (a box's edge, a hole's rim, a
   /// pocket's floor by its wall) faces no surface that is there: views that measure both faces fail it, and
   /// the cover spent views on those rows alone (docs/quality.md: the box with a blind hole 39 views, 1.44×
   /// the cell oracle; by 4 samples 30). 0 here, 4 in config/planner/default.yaml. Under the registration

@@ -105,17 +105,34 @@ Countermeasures with_free_space_margin(Countermeasures cm, const Countermeasures
   return cm;
 }
 
-/// The free-space margin (config.hpp) against the rough model's own error, unless the rows are the object's
-/// own dense mesh: a mesh taken as given (not decimated) whose rows lie closer together than twice the
-/// visibility margin already probes, with its neighbours' own rays, the ±margin around each row that the
-/// margin's displaced rays would, and its normals are the object's. Measured (docs/quality.md): the bunny as
-/// given (37.7k rows, 1.3 mm apart) plans 45 views at verified m_v 1.000 without it against 57 with it, in a
-/// third of the time; knot1 as given (3.2k rows, 5.5 mm apart) needs it (0.982 without).
-void apply_free_space_margin(ViewPlan& p, PlannerSettings& settings) {
+/// Free space: the guard against the rough model's own error (config.hpp), chosen once per plan. On a cell
+/// the single shot is predicted by footprint samples whatever the rough model, and never by the margin.
+/// - None where the rows are the object's own dense mesh: a mesh taken as given (not decimated) whose rows
+///   lie closer together than twice the visibility margin already probes, with its neighbours' own rays,
+///   the ±margin around each row, and its normals are the object's. Measured (docs/quality.md): the bunny as
+///   given (37.7k rows, 1.3 mm apart) plans 45 views at verified m_v 1.000 without the margin against 57 with
+///   it, in a third of the time; the bunny at 26k rows plans in 9.3 s, 11.8 s with whole-row samples.
+/// - Footprint samples (matrix.footprint_samples) on a rough model free of noise (the object's mesh,
+///   decimated or coarse): it is wrong only at its own resolution, where the surface a row stands for bends
+///   away from its vertex normal. The samples test that surface where it is, each by its triangle's normal,
+///   and leave the rows the rough model gets right (flat faces) at the spec (session 41: free space 717 ->
+///   537 views, m_v of the reach >= 0.99 on 10 of 10 either way; knot1 as given, 3.2k rows 5.5 mm apart,
+///   104 views at verified m_v 0.9935 against the margin's 140 at 0.9997).
+/// - The margin (matrix.free_space_countermeasures) on a rough model that carries noise
+///   (RoughModelOptions::normal_noise_mm, thesis 5.4), or with footprint_samples 0. Noise tilts the
+///   triangles too, at random, which samples cannot model: bench_quality's σ_rm rough models lose up to 0.02
+///   of verified m_v (knot1) by samples alone, and samples with the margin cost 12 % more views for at most
+///   +0.005.
+void choose_free_space_guard(ViewPlan& p, PlannerSettings& settings) {
   const Countermeasures& f = settings.free_space_countermeasures;
   const double spacing_mm = p.rough.size() ? std::sqrt(p.rough.total_area_mm2 / static_cast<double>(p.rough.size())) : 0.0;
-  p.free_space_margin_applied = p.rough_report.decimated || spacing_mm > 2.0 * f.visibility_margin_mm;
-  if (p.free_space_margin_applied) settings.matrix.countermeasures = with_free_space_margin(settings.matrix.countermeasures, f);
+  if (!p.rough_report.decimated && spacing_mm <= 2.0 * f.visibility_margin_mm) return;  // the object's own dense mesh
+  if (settings.footprint_samples > 0 && !(p.rough_options.normal_noise_mm > 0.0)) {
+    p.free_space_footprint_samples = true;
+  } else if (f.any()) {
+    p.free_space_margin_applied = true;
+    settings.matrix.countermeasures = with_free_space_margin(settings.matrix.countermeasures, f);
+  }
 }
 
 /// The cover's row weights: the rows' areas, zero for rows already measured (the cover goes after the rest),
@@ -509,25 +526,25 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     p.rough = build_rough_model(std::move(object_mm), rough_options, &p.rough_report);
     p.times.rough_model_s = seconds_since(t);
     check("the rough model");
-    if (!cell_in && settings.free_space_countermeasures.any()) {
-      apply_free_space_margin(p, settings);
+    if (!cell_in) {
+      choose_free_space_guard(p, settings);
       p.settings.matrix.countermeasures = settings.matrix.countermeasures;
     }
     const std::vector<double> row_weight = row_weights(p.rough, measured_rows, row_weight_scale);
     // The rows predicted by footprint samples: a replan's open rows, by what they lack (the caller's measured
-    // coverage); or, in a single shot on a cell when matrix.cell_footprint_samples says so, every row by its
-    // whole footprint, but for rows under two samples' worth of area (matrix.cell_footprint_sample_area_mm2),
-    // left to their vertex unless on a crease; else the rows on a crease (matrix.crease_footprint_samples,
-    // crease_footprint_samples). Only a replan's also get candidates aimed at them (the stage's `footprints`): for
+    // coverage); or, in a single shot when matrix.footprint_samples says so (on a cell, and in free space
+    // where choose_free_space_guard chose them), every row by its whole footprint, but for rows under two samples' worth of area
+    // (matrix.footprint_sample_area_mm2), left to their vertex unless on a crease; else the rows on a crease
+    // (matrix.crease_footprint_samples). Only a replan's also get candidates aimed at them (the stage's `footprints`): for
     // every row of a single shot those are five more per row, and 13-14 s more of plan for 5k rows
     // (docs/quality.md).
     RowFootprints whole;
     const RowFootprints* predicted_by = footprints;
-    bool every_row = false;  // `whole` is a single shot's on a cell: rows `matrix` is built for in full
+    bool every_row = false;  // `whole` is a single shot's: rows `matrix` is built for in full
     if (!footprints && !measured_rows) {
-      if (p.cell && settings.cell_footprint_samples > 0) {
-        WholeRowSampling sampling{static_cast<std::size_t>(settings.cell_footprint_samples), settings.cell_footprint_sample_area_mm2, {}, 0};
-        if (settings.cell_footprint_sample_area_mm2 > 0.0 && settings.crease_footprint_samples > 0) {
+      if (settings.footprint_samples > 0 && (p.cell || p.free_space_footprint_samples)) {
+        WholeRowSampling sampling{static_cast<std::size_t>(settings.footprint_samples), settings.footprint_sample_area_mm2, {}, 0};
+        if (settings.footprint_sample_area_mm2 > 0.0 && settings.crease_footprint_samples > 0) {
           sampling.crease = crease_rows(p.rough, settings.crease_angle_rad);
           sampling.crease_samples = static_cast<std::size_t>(settings.crease_footprint_samples);
         }
@@ -659,8 +676,8 @@ json settings_json(const ViewPlan& p) {
                 {"local_search_iterations", p.settings.cover.local_search_iterations},
                 {"local_search_stall_work", p.settings.cover.local_search_stall_work},
                 {"local_search_time_limit_s", p.settings.cover.local_search_time_limit_s}}},
-              {"matrix", {{"ray_offset_mm", p.settings.matrix.ray_offset_mm}, {"cell_footprint_samples", p.settings.cell_footprint_samples},
-                          {"cell_footprint_sample_area_mm2", p.settings.cell_footprint_sample_area_mm2},
+              {"matrix", {{"ray_offset_mm", p.settings.matrix.ray_offset_mm}, {"footprint_samples", p.settings.footprint_samples},
+                          {"footprint_sample_area_mm2", p.settings.footprint_sample_area_mm2},
                           {"crease_footprint_samples", p.settings.crease_footprint_samples},
                           {"crease_angle_rad", p.settings.crease_angle_rad}}}};
   {
@@ -670,7 +687,8 @@ json settings_json(const ViewPlan& p) {
                                         {"compliance_buffer", cm.compliance_buffer},
                                         {"visibility_margin_mm", cm.visibility_margin_mm},
                                         {"from_cell_pose_error", p.settings.countermeasures_from_cell},
-                                        {"free_space_margin_applied", p.free_space_margin_applied}};
+                                        {"free_space_margin_applied", p.free_space_margin_applied},
+                                        {"free_space_footprint_samples", p.free_space_footprint_samples}};
   }
   return out;
 }

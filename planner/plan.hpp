@@ -48,14 +48,17 @@ struct ViewPlan {
   RoughModelReport rough_report;
   RoughModel rough;
   GenerationReport generation;
-  /// matrix.free_space_countermeasures merged in: no cell, and a decimated rough model or rows farther apart than
-  /// twice the visibility margin (apply_free_space_margin in plan.cpp)
+  /// Free space, the guard against the rough model's own error (choose_free_space_guard in plan.cpp), at
+  /// most one: matrix.free_space_countermeasures merged in (a rough model with noise, or footprint_samples
+  /// 0), or every row predicted by its footprint samples (noise-free); neither on a mesh as given whose rows
+  /// lie closer together than twice the visibility margin.
   bool free_space_margin_applied = false;
+  bool free_space_footprint_samples = false;
   MatrixStats matrix_stats;
   std::size_t candidates = 0;
   std::size_t segments = 0;  // labelled surface patches of the rough model
   /// Rows predicted by footprint samples instead of their vertex (a replan's open rows, or a single shot's
-  /// crease rows and, on a cell, its rows of matrix.cell_footprint_sample_area_mm2); 0: all by the vertex.
+  /// crease rows and, on a cell, its rows of matrix.footprint_sample_area_mm2); 0: all by the vertex.
   std::size_t rows_by_footprint_samples = 0;
   double matrix_density = 0.0;
   std::size_t matrix_bytes = 0;

@@ -318,7 +318,7 @@ std::vector<AimPoint> aims_open_to_sensor(const std::vector<AimPoint>& aims, con
 
 // Where the rough surface bends (a cleft, a rim by the plate, a crease), the vertex normal is a mean no face has,
 // and a view along it sees every face at an angle: with samples judging a row by its faces
-// (matrix.cell_footprint_samples) such views finish it (knot1 on the turntable: docs/quality.md).
+// (matrix.footprint_samples) such views finish it (knot1 on the turntable: docs/quality.md).
 std::vector<AimPoint> face_aims(const RoughModel& rough, const std::vector<std::uint32_t>& rows, double min_angle_rad, double standoff_mm) {
   constexpr std::size_t kMaxFacesPerRow = 3;
   std::vector<std::vector<std::uint32_t>> incident(rough.size());

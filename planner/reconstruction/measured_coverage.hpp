@@ -69,7 +69,7 @@ class MeasuredCoverage {
   std::vector<std::pair<std::uint64_t, std::uint32_t>> row_grid_;
 };
 
-/// How a single shot on a cell samples its rows' whole footprints (PlannerSettings::cell_footprint_samples).
+/// How a single shot on a cell samples its rows' whole footprints (PlannerSettings::footprint_samples).
 struct WholeRowSampling {
   std::size_t max_samples = 1;  // per row, at most
   /// One sample per this much of a row's area (mm²); a row under two samples' worth is left to its vertex.
@@ -80,7 +80,7 @@ struct WholeRowSampling {
 };
 
 /// Rows' whole footprints (nothing measured yet), as a single shot predicts rows by
-/// (PlannerSettings::cell_footprint_samples): MeasuredCoverage(rough, spec, options).open_footprints of every
+/// (PlannerSettings::footprint_samples): MeasuredCoverage(rough, spec, options).open_footprints of every
 /// row that `s` gives two samples or more, each with its count.
 RowFootprints whole_row_footprints(const RoughModel& rough, const ModelSpec& spec, const WholeRowSampling& s, CoverageOptions options = {});
 

@@ -121,15 +121,23 @@ TEST(Config, MissingFileAndBadPlannerSettings) {
   }
   std::ofstream(p) << "cover:\n  mode: exhaustive\n";
   EXPECT_THROW(load_planner_settings(p), ConfigError);
-  std::ofstream(p) << "matrix:\n  cell_footprint_samples: 65\n";
+  std::ofstream(p) << "matrix:\n  footprint_samples: 65\n";
   try {
     load_planner_settings(p);
-    ADD_FAILURE() << "accepted cell_footprint_samples 65";
+    ADD_FAILURE() << "accepted footprint_samples 65";
   } catch (const ConfigError& e) {
-    EXPECT_THAT(e.what(), HasSubstr("matrix.cell_footprint_samples: must be in [0, 64], got 65"));
+    EXPECT_THAT(e.what(), HasSubstr("matrix.footprint_samples: must be in [0, 64], got 65"));
   }
-  std::ofstream(p) << "matrix:\n  cell_footprint_samples: 8\n";
-  EXPECT_EQ(load_planner_settings(p).cell_footprint_samples, 8);
+  std::ofstream(p) << "matrix:\n  footprint_samples: 8\n";
+  EXPECT_EQ(load_planner_settings(p).footprint_samples, 8);
+  // The key's name until session 41, when it came to apply in free space too: refused with the new name.
+  std::ofstream(p) << "matrix:\n  cell_footprint_sample_area_mm2: 4\n";
+  try {
+    load_planner_settings(p);
+    ADD_FAILURE() << "accepted the old key cell_footprint_sample_area_mm2";
+  } catch (const ConfigError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("matrix.cell_footprint_sample_area_mm2: was renamed matrix.footprint_sample_area_mm2"));
+  }
   // A crease angle of 2 rad (115°) would take no row at all: refused, naming the key and the value.
   std::ofstream(p) << "matrix:\n  crease_angle_rad: 2\n";
   try {

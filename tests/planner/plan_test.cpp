@@ -98,12 +98,32 @@ TEST(Plan, ACancelRequestStopsPlanningAndNamesTheStage) {
   }
 }
 
-// matrix.free_space_countermeasures: the shipped margin, applied to plans without a cell and only to them.
+// matrix.free_space_countermeasures: the shipped margin, applied to plans without a cell and only to them, and
+// (since session 41) only where footprint samples do not stand in for it: with matrix.footprint_samples 0, or
+// on a rough model that carries noise. A noise-free rough model is predicted by its footprint samples instead.
 TEST(Plan, TheFreeSpaceMarginTightensTheMatrixWithoutACellOnly) {
   const PlannerSettings shipped = load_planner_settings(testing::source_path("config/planner/default.yaml"));
   EXPECT_DOUBLE_EQ(shipped.free_space_countermeasures.compliance_buffer, 0.1);
   EXPECT_DOUBLE_EQ(shipped.free_space_countermeasures.visibility_margin_mm, 1.0);
+  EXPECT_EQ(shipped.footprint_samples, 4);
+  {
+    RoughModelOptions clean, noisy;
+    clean.target_vertices = noisy.target_vertices = 600;
+    noisy.normal_noise_mm = 0.5;
+    const TriangleMesh m = mushroom_mm();
+    const ViewPlan by_samples = plan_views(m, testing::thesis_sensor(), testing::thesis_spec(), shipped, clean, 2);
+    const ViewPlan by_margin = plan_views(m, testing::thesis_sensor(), testing::thesis_spec(), shipped, noisy, 2);
+    EXPECT_FALSE(by_samples.free_space_margin_applied);
+    EXPECT_TRUE(by_samples.free_space_footprint_samples);
+    EXPECT_FALSE(by_margin.free_space_footprint_samples);
+    EXPECT_DOUBLE_EQ(by_samples.settings.matrix.countermeasures.compliance_buffer, 0.0);
+    EXPECT_EQ(by_samples.rows_by_footprint_samples, by_samples.rough.size());  // none of its 600 rows is under two samples (8 mm²)
+    EXPECT_TRUE(by_margin.free_space_margin_applied);
+    EXPECT_DOUBLE_EQ(by_margin.settings.matrix.countermeasures.compliance_buffer, 0.1);
+    EXPECT_EQ(by_margin.rows_by_footprint_samples, crease_rows(by_margin.rough, shipped.crease_angle_rad).size());
+  }
   PlannerSettings none = shipped, margin = shipped;
+  none.footprint_samples = margin.footprint_samples = 0;  // by the vertex: the margin stands alone
   none.free_space_countermeasures = {};
   RoughModelOptions o;
   o.target_vertices = 600;
@@ -140,6 +160,12 @@ TEST(Plan, TheFreeSpaceMarginTightensTheMatrixWithoutACellOnly) {
     decimated.target_vertices = 400;
     const ViewPlan coarse = plan_views(testing::flat_patch(40, 1.0), testing::thesis_sensor(), testing::thesis_spec(), margin, decimated, 2);
     EXPECT_FALSE(dense.free_space_margin_applied);
+    // Nor footprint samples with the shipped settings: a dense mesh as given is its own sample (26k rows
+    // would pay seconds for them, docs/planner.md).
+    const ViewPlan dense_shipped = plan_views(testing::flat_patch(40, 1.0), testing::thesis_sensor(), testing::thesis_spec(), shipped, as_given, 2);
+    EXPECT_FALSE(dense_shipped.free_space_margin_applied);
+    EXPECT_FALSE(dense_shipped.free_space_footprint_samples);
+    EXPECT_EQ(dense_shipped.rows_by_footprint_samples, 0u);
     EXPECT_DOUBLE_EQ(dense.settings.matrix.countermeasures.visibility_margin_mm, 0.0);
     EXPECT_TRUE(sparse.free_space_margin_applied);
     EXPECT_TRUE(coarse.free_space_margin_applied);
@@ -553,20 +579,21 @@ std::vector<std::uint8_t> samples_seen(const RowFootprints& fp, const ViewPlan& 
   return seen;
 }
 
-// A single shot on a cell by footprint (matrix.cell_footprint_samples, issue 15): a row is predicted measured
+// A single shot on a cell by footprint (matrix.footprint_samples, issue 15): a row is predicted measured
 // only when the chosen views measure enough of its footprint's samples (all 8 of 8 at jobs.row_fraction 0.9),
 // as the closed loop will judge it. On a box on the plate (welded, as a file is) the vertex test predicts rows
 // whose footprint the same views do not measure, where the box's rims bend the footprint onto another face;
 // the footprint plan predicts none. Checked here with the samples' own matrix, independent of the cover's
-// bookkeeping. The plan is the same for any thread count.
-TEST(Plan, ASingleShotOnACellPredictsRowsByTheirFootprints) {
+// bookkeeping. The plan is the same for any thread count. In free space (since session 41) the same: there the
+// samples replaced the margin against the rough model's error (matrix.free_space_countermeasures).
+TEST(Plan, ASingleShotPredictsRowsByTheirFootprintsOnACellAndInFreeSpace) {
   const TriangleMesh box = welded_box();
   const CellModel cell = load_cell(testing::source_path("config/cells/turntable-lift-tilt.yaml"));
   const SensorModel sensor = testing::thesis_sensor();
   const ModelSpec spec = testing::thesis_spec();
   PlannerSettings by_vertex;
   PlannerSettings by_footprint;
-  by_footprint.cell_footprint_samples = 8;
+  by_footprint.footprint_samples = 8;
   const RoughModelOptions o;
   const ViewPlan v = plan_views(box, sensor, spec, by_vertex, o, 2, &cell);
   const ViewPlan f = plan_views(box, sensor, spec, by_footprint, o, 2, &cell);
@@ -591,6 +618,15 @@ TEST(Plan, ASingleShotOnACellPredictsRowsByTheirFootprints) {
   EXPECT_EQ(f_short, 0u);
   ASSERT_EQ(f.views.size(), f1.views.size());
   for (std::size_t k = 0; k < f.views.size(); ++k) EXPECT_EQ(f.views[k].transform(), f1.views[k].transform());
+
+  const ViewPlan fv = plan_views(box, sensor, spec, by_vertex, o, 2);
+  const ViewPlan ff = plan_views(box, sensor, spec, by_footprint, o, 2);
+  const std::size_t fv_short = short_rows(fv), ff_short = short_rows(ff);
+  std::printf("free space: by vertex %zu predicted rows (%zu short), %zu views; by footprint %zu (%zu short), %zu views\n",
+              fv.predicted_rows.size(), fv_short, fv.views.size(), ff.predicted_rows.size(), ff_short, ff.views.size());
+  EXPECT_GT(fv_short, 0u);
+  EXPECT_EQ(ff_short, 0u);
+  EXPECT_EQ(ff.rows_by_footprint_samples, ff.rough.size());
 }
 
 // The rows on a crease (matrix.crease_footprint_samples, issue 15): on a welded 80 × 80 × 60 mm box of 4 mm

@@ -162,7 +162,7 @@ TEST(MeasuredCoverage, OpenFootprintSamplesLieOnTheFacesOfABentFootprint) {
   EXPECT_GT(off_ridge, 4u);
 }
 
-// A single shot's whole-row footprints (matrix.cell_footprint_samples with cell_footprint_sample_area_mm2):
+// A single shot's whole-row footprints (matrix.footprint_samples with footprint_sample_area_mm2):
 // one sample per that much of a row's area, and a row under two samples' worth left to its vertex. On a
 // 40 mm flat patch of 4 mm steps an interior row is a third of six 8 mm² triangles, 16 mm², an edge row a
 // third of three, 8 mm², a corner less. At 5 mm² a sample, the 9 × 9 interior rows take 3 samples each and
