@@ -154,7 +154,7 @@ void run_as_given(const sp::TriangleMesh& mesh_mm, int threads) {
                   p.generation.positions, p.candidates, p.views.size(),
                   p.cover.cumulative_fraction.empty() ? 0.0 : p.cover.cumulative_fraction.back(), p.cover.measurable_fraction,
                   p.times.matrix_s, p.times.cover_s, total);
-      if (!c) std::printf("  margin %s", p.free_space_margin_applied ? "on" : "off");
+      if (!c) std::printf("  margin %s", p.free_space_guard == sp::FreeSpaceGuard::kMargin ? "on" : "off");
       if (fraction != 0.0) std::printf("   (%.2fx the d_v-alone time; target <= 10 s)", total / reference_s);
       std::printf("\n");
     }

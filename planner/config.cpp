@@ -5,6 +5,7 @@
 #include <numbers>
 #include <set>
 #include <sstream>
+#include <utility>
 
 #include <yaml-cpp/yaml.h>
 
@@ -223,9 +224,12 @@ void read_placement(Section s, PlacementSettings& pl) {
 
 void read_matrix(Section m, PlannerSettings& p) {
   p.matrix.ray_offset_mm = m.non_negative("ray_offset_mm", p.matrix.ray_offset_mm);
-  for (const char* old : {"cell_footprint_samples", "cell_footprint_sample_area_mm2"})
-    if (m.has(old))  // session 41: they apply in free space too (config.hpp)
-      m.fail(m.key_path(old), std::string("was renamed matrix.") + (old + 5) + " (it now applies in free space too)");
+  // Session 41: they apply in free space too (config.hpp).
+  static constexpr std::pair<const char*, const char*> kRenamed[] = {
+      {"cell_footprint_samples", "footprint_samples"}, {"cell_footprint_sample_area_mm2", "footprint_sample_area_mm2"}};
+  for (const auto& [old_key, new_key] : kRenamed)
+    if (m.has(old_key))
+      m.fail(m.key_path(old_key), std::string("was renamed matrix.") + new_key + " (it now applies in free space too)");
   p.footprint_samples = m.ranged("footprint_samples", p.footprint_samples, 0, 64);
   p.footprint_sample_area_mm2 = m.ranged("footprint_sample_area_mm2", p.footprint_sample_area_mm2, 0.0, 1000.0);
   p.crease_footprint_samples = m.ranged("crease_footprint_samples", p.crease_footprint_samples, 0, 64);

@@ -128,9 +128,9 @@ void choose_free_space_guard(ViewPlan& p, PlannerSettings& settings) {
   const double spacing_mm = p.rough.size() ? std::sqrt(p.rough.total_area_mm2 / static_cast<double>(p.rough.size())) : 0.0;
   if (!p.rough_report.decimated && spacing_mm <= 2.0 * f.visibility_margin_mm) return;  // the object's own dense mesh
   if (settings.footprint_samples > 0 && !(p.rough_options.normal_noise_mm > 0.0)) {
-    p.free_space_footprint_samples = true;
+    p.free_space_guard = FreeSpaceGuard::kFootprintSamples;
   } else if (f.any()) {
-    p.free_space_margin_applied = true;
+    p.free_space_guard = FreeSpaceGuard::kMargin;
     settings.matrix.countermeasures = with_free_space_margin(settings.matrix.countermeasures, f);
   }
 }
@@ -307,8 +307,8 @@ MeasurabilityMatrix make_matrix(const Stage& s, const OcclusionScene& scene, con
   // bore's wall, seen only at grazing incidence): such rows keep the elements the plain test gives them.
   PlainElements plain{plain_cm, {}};
   auto matrix = build_measurability(p.rough, scene, s.sensor, s.spec, candidates, s.settings.matrix, &p.matrix_stats,
-                                    s.cancel, p.free_space_margin_applied ? &plain : nullptr);
-  if (p.free_space_margin_applied) p.generation.rows_without_margin = keep_plain_elements_of_lost_rows(matrix, plain);
+                                    s.cancel, p.free_space_guard == FreeSpaceGuard::kMargin ? &plain : nullptr);
+  if (p.free_space_guard == FreeSpaceGuard::kMargin) p.generation.rows_without_margin = keep_plain_elements_of_lost_rows(matrix, plain);
   strip_measured(matrix, s.measured_rows);
   // Rows nothing measures get more views: on a cell-native cell first the cell's views of themselves, then
   // (any cell, or free space) views along their open directions (deep holes, undercuts).
@@ -542,7 +542,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     const RowFootprints* predicted_by = footprints;
     bool every_row = false;  // `whole` is a single shot's: rows `matrix` is built for in full
     if (!footprints && !measured_rows) {
-      if (settings.footprint_samples > 0 && (p.cell || p.free_space_footprint_samples)) {
+      if (settings.footprint_samples > 0 && (p.cell || p.free_space_guard == FreeSpaceGuard::kFootprintSamples)) {
         WholeRowSampling sampling{static_cast<std::size_t>(settings.footprint_samples), settings.footprint_sample_area_mm2, {}, 0};
         if (settings.footprint_sample_area_mm2 > 0.0 && settings.crease_footprint_samples > 0) {
           sampling.crease = crease_rows(p.rough, settings.crease_angle_rad);
@@ -590,7 +590,7 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
       // stripped from `matrix`.
       samples = cover_by_samples(matrix, row_weight, *predicted_by, scene, sensor, spec, candidates, settings.matrix,
                                  p.rough.mean_edge_mm, cancel,
-                                 p.free_space_margin_applied ? &settings_in.matrix.countermeasures : nullptr,
+                                 p.free_space_guard == FreeSpaceGuard::kMargin ? &settings_in.matrix.countermeasures : nullptr,
                                  every_row ? &p.rough.triangles : nullptr);
       // Under the between-view constraint (eq. 4.2) two views overlap on a footprint row when each measures
       // some of its samples: counted by samples, a box's edge row no longer lets views of its two faces
@@ -687,8 +687,8 @@ json settings_json(const ViewPlan& p) {
                                         {"compliance_buffer", cm.compliance_buffer},
                                         {"visibility_margin_mm", cm.visibility_margin_mm},
                                         {"from_cell_pose_error", p.settings.countermeasures_from_cell},
-                                        {"free_space_margin_applied", p.free_space_margin_applied},
-                                        {"free_space_footprint_samples", p.free_space_footprint_samples}};
+                                        {"free_space_margin_applied", p.free_space_guard == FreeSpaceGuard::kMargin},
+                                        {"free_space_footprint_samples", p.free_space_guard == FreeSpaceGuard::kFootprintSamples}};
   }
   return out;
 }

@@ -39,6 +39,15 @@ struct StageTimes {
   double total_s() const { return load_s + rough_model_s + scene_s + viewpoints_s + matrix_s + cover_s; }
 };
 
+/// Free space, the guard against the rough model's own error, chosen once per plan (choose_free_space_guard in
+/// plan.cpp); on a cell always kNone (a single shot there is predicted by footprint samples whatever the rough
+/// model).
+enum class FreeSpaceGuard {
+  kNone,             // a cell, or a mesh as given whose rows lie closer together than twice the visibility margin
+  kMargin,           // matrix.free_space_countermeasures merged in (a rough model with noise, or footprint_samples 0)
+  kFootprintSamples  // every row predicted by its footprint samples (a noise-free rough model)
+};
+
 struct ViewPlan {
   ObjectSource object;
   SensorModel sensor;
@@ -48,17 +57,13 @@ struct ViewPlan {
   RoughModelReport rough_report;
   RoughModel rough;
   GenerationReport generation;
-  /// Free space, the guard against the rough model's own error (choose_free_space_guard in plan.cpp), at
-  /// most one: matrix.free_space_countermeasures merged in (a rough model with noise, or footprint_samples
-  /// 0), or every row predicted by its footprint samples (noise-free); neither on a mesh as given whose rows
-  /// lie closer together than twice the visibility margin.
-  bool free_space_margin_applied = false;
-  bool free_space_footprint_samples = false;
+  FreeSpaceGuard free_space_guard = FreeSpaceGuard::kNone;
   MatrixStats matrix_stats;
   std::size_t candidates = 0;
   std::size_t segments = 0;  // labelled surface patches of the rough model
   /// Rows predicted by footprint samples instead of their vertex (a replan's open rows, or a single shot's
-  /// crease rows and, on a cell, its rows of matrix.footprint_sample_area_mm2); 0: all by the vertex.
+  /// crease rows and, on a cell or under FreeSpaceGuard::kFootprintSamples, its rows of
+  /// matrix.footprint_sample_area_mm2); 0: all by the vertex.
   std::size_t rows_by_footprint_samples = 0;
   double matrix_density = 0.0;
   std::size_t matrix_bytes = 0;

@@ -69,7 +69,8 @@ class MeasuredCoverage {
   std::vector<std::pair<std::uint64_t, std::uint32_t>> row_grid_;
 };
 
-/// How a single shot on a cell samples its rows' whole footprints (PlannerSettings::footprint_samples).
+/// How a single shot samples its rows' whole footprints (PlannerSettings::footprint_samples): on a cell, and in
+/// free space under FreeSpaceGuard::kFootprintSamples (a noise-free rough model).
 struct WholeRowSampling {
   std::size_t max_samples = 1;  // per row, at most
   /// One sample per this much of a row's area (mm²); a row under two samples' worth is left to its vertex.

@@ -113,12 +113,10 @@ TEST(Plan, TheFreeSpaceMarginTightensTheMatrixWithoutACellOnly) {
     const TriangleMesh m = mushroom_mm();
     const ViewPlan by_samples = plan_views(m, testing::thesis_sensor(), testing::thesis_spec(), shipped, clean, 2);
     const ViewPlan by_margin = plan_views(m, testing::thesis_sensor(), testing::thesis_spec(), shipped, noisy, 2);
-    EXPECT_FALSE(by_samples.free_space_margin_applied);
-    EXPECT_TRUE(by_samples.free_space_footprint_samples);
-    EXPECT_FALSE(by_margin.free_space_footprint_samples);
+    EXPECT_EQ(by_samples.free_space_guard, FreeSpaceGuard::kFootprintSamples);
     EXPECT_DOUBLE_EQ(by_samples.settings.matrix.countermeasures.compliance_buffer, 0.0);
     EXPECT_EQ(by_samples.rows_by_footprint_samples, by_samples.rough.size());  // none of its 600 rows is under two samples (8 mm²)
-    EXPECT_TRUE(by_margin.free_space_margin_applied);
+    EXPECT_EQ(by_margin.free_space_guard, FreeSpaceGuard::kMargin);
     EXPECT_DOUBLE_EQ(by_margin.settings.matrix.countermeasures.compliance_buffer, 0.1);
     EXPECT_EQ(by_margin.rows_by_footprint_samples, crease_rows(by_margin.rough, shipped.crease_angle_rad).size());
   }
@@ -159,16 +157,15 @@ TEST(Plan, TheFreeSpaceMarginTightensTheMatrixWithoutACellOnly) {
     RoughModelOptions decimated;
     decimated.target_vertices = 400;
     const ViewPlan coarse = plan_views(testing::flat_patch(40, 1.0), testing::thesis_sensor(), testing::thesis_spec(), margin, decimated, 2);
-    EXPECT_FALSE(dense.free_space_margin_applied);
+    EXPECT_EQ(dense.free_space_guard, FreeSpaceGuard::kNone);
     // Nor footprint samples with the shipped settings: a dense mesh as given is its own sample (26k rows
     // would pay seconds for them, docs/planner.md).
     const ViewPlan dense_shipped = plan_views(testing::flat_patch(40, 1.0), testing::thesis_sensor(), testing::thesis_spec(), shipped, as_given, 2);
-    EXPECT_FALSE(dense_shipped.free_space_margin_applied);
-    EXPECT_FALSE(dense_shipped.free_space_footprint_samples);
+    EXPECT_EQ(dense_shipped.free_space_guard, FreeSpaceGuard::kNone);
     EXPECT_EQ(dense_shipped.rows_by_footprint_samples, 0u);
     EXPECT_DOUBLE_EQ(dense.settings.matrix.countermeasures.visibility_margin_mm, 0.0);
-    EXPECT_TRUE(sparse.free_space_margin_applied);
-    EXPECT_TRUE(coarse.free_space_margin_applied);
+    EXPECT_EQ(sparse.free_space_guard, FreeSpaceGuard::kMargin);
+    EXPECT_EQ(coarse.free_space_guard, FreeSpaceGuard::kMargin);
   }
   // On a cell the margin is not applied: the same plan as without it.
   const CellModel cell = load_cell(testing::source_path("config/cells/turntable-lift-tilt.yaml"));
