@@ -181,6 +181,7 @@ struct CellOracle {
   double reach_area_mm2 = 0.0, total_area_mm2 = 0.0;
   double lost_range = 0.0, lost_plate = 0.0, lost_axes = 0.0, lost_collision = 0.0;
   std::size_t views_95 = 0, views_99 = 0, views_999 = 0;  // greedy views to 95/99/99.9 % of the reach
+  std::size_t views_995 = 0;  // and to 99.5 %, the closed loop's completeness target (issue 15)
   std::vector<double> progression;                         // share of the reach after each greedy view
   double cell_time_s = std::nan("");                       // its views to 99 %, travel-ordered (cells only)
   double reachable() const { return total_area_mm2 > 0 ? reach_area_mm2 / total_area_mm2 : 0.0; }
@@ -295,6 +296,7 @@ inline CellOracle cell_oracle(const sp::TriangleMesh& fine_mesh, const sp::Rough
     o.views_95 = views_to(oprog, 0.95);
     o.views_99 = views_to(oprog, 0.99);
     o.views_999 = views_to(oprog, 0.999);
+    o.views_995 = views_to(oprog, 0.995);
     o.progression = oprog;
     if (cell) {
       std::vector<sp::Viewpoint> ov;

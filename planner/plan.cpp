@@ -361,13 +361,16 @@ MeasurabilityMatrix make_matrix(const Stage& s, const OcclusionScene& scene, con
   return matrix;
 }
 
-/// Axis targets of every candidate, for costs and travel (IK seeded at home, so deterministic); none without
-/// a cell.
-std::vector<JointVector> axis_targets(const ViewPlan& p, const std::vector<Viewpoint>& candidates) {
+/// Axis targets of the candidates `which` (every one when null), for costs and travel (IK seeded at home, so
+/// deterministic); the others, and all without a cell, stay empty.
+std::vector<JointVector> axis_targets(const ViewPlan& p, const std::vector<Viewpoint>& candidates,
+                                      const std::vector<std::uint32_t>* which = nullptr) {
   std::vector<JointVector> q_of;
   if (!p.cell) return q_of;
   q_of.resize(candidates.size());
-  tbb::parallel_for(std::size_t{0}, candidates.size(), [&](std::size_t i) {
+  const std::size_t n = which ? which->size() : candidates.size();
+  tbb::parallel_for(std::size_t{0}, n, [&](std::size_t k) {
+    const std::size_t i = which ? (*which)[k] : k;
     Eigen::Isometry3d pose;
     pose.matrix() = candidates[i].transform();
     const auto ik = inverse_kinematics(*p.cell, pose, candidates[i].scan_length_mm);
@@ -377,10 +380,14 @@ std::vector<JointVector> axis_targets(const ViewPlan& p, const std::vector<Viewp
 }
 
 /// The cover (thesis ch. 4): exact (CBC) when asked, else constrained greedy improved by the local search;
-/// with a cell, then ordered for the least travel from home, with each view's move and scan time.
+/// with a cell, then ordered for the least travel from home, with each view's move and scan time. The axis
+/// targets (inverse kinematics) of every candidate only for exact cover's costs, else of the chosen views: on
+/// arm_turntable each is a numerical IK solve, 27k candidates took 3.6 s of a 5k-row plan (fandisk).
 void choose_cover(ViewPlan& p, const MeasurabilityMatrix& matrix, const std::vector<double>& row_weight,
-                  const std::vector<Viewpoint>& candidates, const std::vector<JointVector>& q_of) {
+                  const std::vector<Viewpoint>& candidates) {
+  std::vector<JointVector> q_of;
   if (p.settings.cover.mode == CoverMode::exact) {
+    q_of = axis_targets(p, candidates);
     // With a cell, c_j is the view's expected time: its scan plus half the move from home (a view is entered
     // and left, each roughly half-way across the envelope).
     std::vector<double> cost;
@@ -404,6 +411,7 @@ void choose_cover(ViewPlan& p, const MeasurabilityMatrix& matrix, const std::vec
     improve_by_local_search(matrix, row_weight, p);
   }
   if (!p.cell || p.cover.views.empty()) return;
+  if (q_of.empty()) q_of = axis_targets(p, candidates, &p.cover.views);
   // Execute in the order that minimises travel from home; the cumulative figures follow that order.
   std::vector<JointVector> targets;
   for (auto j : p.cover.views) targets.push_back(q_of[j]);
@@ -608,13 +616,11 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
     check("the measurability matrix");
 
     t = Clock::now();
-    const std::vector<JointVector> q_of = axis_targets(p, candidates);
-    check("the axis targets");
     if (samples) {
-      choose_cover(p, samples->matrix, samples->weight, candidates, q_of);
+      choose_cover(p, samples->matrix, samples->weight, candidates);
       record_views_by_samples(p, *samples, *predicted_by, candidates, measured_rows);
     } else {
-      choose_cover(p, matrix, row_weight, candidates, q_of);
+      choose_cover(p, matrix, row_weight, candidates);
       record_views(p, matrix, candidates, measured_rows);
     }
     if (settings.keep_candidates) p.candidate_views = candidates;
