@@ -187,6 +187,7 @@ void fit_to_cell(const Stage& s, std::vector<Viewpoint>& cands) {
       moved.standoff_mm = v.standoff_mm;
       moved.target_row = v.target_row;
       moved.twist_level = v.twist_level;
+      moved.source = v.source;
       moved.tilt_rad = v.tilt_rad;
       v = moved;
       fate[i] = 1;
@@ -233,7 +234,8 @@ std::vector<Viewpoint> make_candidates(const Stage& s, const OcclusionScene& sce
     for (std::uint32_t i = 0; i < p.rough.size(); ++i)
       if (p.rough.segment[i] >= 0) rows_of[p.rough.segment[i]].push_back(i);
     for (const auto& [label, rows] : rows_of) {
-      const auto sbv = single_best_views(p.rough, rows, s.sensor, s.spec, 4, s.settings.viewpoints.standoff_factor);
+      auto sbv = single_best_views(p.rough, rows, s.sensor, s.spec, 4, s.settings.viewpoints.standoff_factor);
+      for (Viewpoint& v : sbv) v.source = ViewSource::single_best;
       candidates.insert(candidates.end(), sbv.begin(), sbv.end());
       p.generation.single_best_views += sbv.size();
     }
@@ -257,7 +259,8 @@ std::vector<Viewpoint> make_candidates(const Stage& s, const OcclusionScene& sce
       const std::vector<AimPoint> open =
           aims_open_to_sensor(footprint_aims(*s.footprints, s.sensor.optimal_standoff_mm * vs.standoff_factor), scene, s.sensor,
                               ray_offset_mm(p.rough, s.settings.matrix), &p.cell_generation.footprint_aims_closed);
-      const std::vector<Viewpoint> at = cell_viewpoints_at(open, s.sensor, s.spec, s.settings.viewpoints, *p.cell, *s.checker, &aimed);
+      std::vector<Viewpoint> at = cell_viewpoints_at(open, s.sensor, s.spec, s.settings.viewpoints, *p.cell, *s.checker, &aimed);
+      for (Viewpoint& v : at) v.source = ViewSource::footprint_aim;
       native.insert(native.end(), at.begin(), at.end());
       p.cell_generation.footprint_aims = aimed.seeds;
       p.cell_generation.footprint_candidates = aimed.candidates;
@@ -334,6 +337,7 @@ MeasurabilityMatrix make_matrix(const Stage& s, const OcclusionScene& scene, con
     aims = aims_open_to_sensor(aims, scene, s.sensor, ray_offset_mm(p.rough, s.settings.matrix), &closed);
     CellGenerationReport self;
     std::vector<Viewpoint> own = cell_viewpoints_at(aims, s.sensor, s.spec, s.settings.viewpoints, *p.cell, *s.checker, &self);
+    for (Viewpoint& v : own) v.source = ViewSource::self_aim;
     merge_duplicates(p, own);
     p.cell_generation.self_aims = self.seeds;
     p.cell_generation.self_aims_closed = closed;
@@ -350,6 +354,7 @@ MeasurabilityMatrix make_matrix(const Stage& s, const OcclusionScene& scene, con
   // stand-offs out to 0.8 of the precision limit see further into a cleft than the nearest clear one.
   std::vector<Viewpoint> extra = open_direction_viewpoints(p.rough, scene, s.sensor, s.spec, s.settings.viewpoints, unmeasurable,
                                                            max_rows, &p.generation.open_direction_rows);
+  for (Viewpoint& v : extra) v.source = ViewSource::open_direction;
   fit_to_cell(s, extra);
   merge_duplicates(p, extra);
   p.generation.open_direction_candidates = extra.size();
@@ -738,6 +743,7 @@ json views_json(const ViewPlan& p) {
                      {"target_row", v.target_row},
                      {"twist_level", v.twist_level},
                      {"tilt_rad", v.tilt_rad},
+                     {"source", to_string(v.source)},
                      {"estimated_gain_area_mm2", p.cover.gain_weight[k]},
                      {"cumulative_estimated_measurability", p.cover.cumulative_fraction[k]},
                      {"cumulative_point_fraction", p.cover.cumulative_point_fraction[k]}});

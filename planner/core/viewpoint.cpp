@@ -13,6 +13,18 @@
 #include "common/errors.hpp"
 
 namespace scancell::planner {
+
+const char* to_string(ViewSource s) {
+  switch (s) {
+    case ViewSource::optimal_zone: return "optimal_zone";
+    case ViewSource::single_best: return "single_best";
+    case ViewSource::footprint_aim: return "footprint_aim";
+    case ViewSource::self_aim: return "self_aim";
+    case ViewSource::open_direction: return "open_direction";
+  }
+  return "unknown";
+}
+
 namespace {
 
 constexpr double kTwoPi = 2.0 * std::numbers::pi;

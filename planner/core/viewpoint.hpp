@@ -15,6 +15,13 @@
 namespace scancell::planner {
 
 /// A generalized viewpoint (v, λs): pose (position, axis, twist) plus the sensor setting (scan length).
+/// Which generator made a candidate (the plan JSON's `source`): the optimal scanning zone (thesis ch. 6; on a
+/// cell-native cell, the views it expands each position into), a segment's single-best view (6.3.4), a
+/// replan's aim at what an open row lacks, a cell's view of a row nothing else measured, or a view along an
+/// open direction (holes, undercuts).
+enum class ViewSource : std::uint8_t { optimal_zone, single_best, footprint_aim, self_aim, open_direction };
+const char* to_string(ViewSource s);
+
 struct Viewpoint {
   Eigen::Vector3d position = Eigen::Vector3d::Zero();  // camera origin (laser rest position), object frame, mm
   Eigen::Vector3d axis = -Eigen::Vector3d::UnitZ();    // unit boresight (camera -z) in the object frame
@@ -24,6 +31,7 @@ struct Viewpoint {
   std::int32_t target_row = -1;                        // rough-model row it was generated for, -1 if none
   std::int32_t twist_level = 0;                        // DECOUPLED twist index k (twist = base + 2πk/d_t)
   double tilt_rad = 0.0;                               // bisector tilt about camera x (0: laser along normal)
+  ViewSource source = ViewSource::optimal_zone;        // the generator that made it
 
   /// Camera-to-object rotation: columns are the camera x, y, z axes in object coordinates.
   Eigen::Matrix3d rotation() const;

@@ -539,6 +539,15 @@ TEST(Plan, RowsNothingMeasuresGetTheCellsViewsAimedAtThemselves) {
     EXPECT_GT(facing_plate, 0u);
     EXPECT_EQ(p.cell_generation.self_aims_closed, facing_plate);
     EXPECT_GT(p.cell_generation.self_candidates, p.cell_generation.candidates);
+    // The plan says which views are the rows' own (its JSON `source`): with two or three positions on the
+    // whole box, most of the plan.
+    std::size_t own = 0;
+    const auto views = plan_to_json(p)["views"];
+    for (std::size_t k = 0; k < p.views.size(); ++k) {
+      own += p.views[k].source == ViewSource::self_aim;
+      EXPECT_EQ(views[k]["source"].get<std::string>(), to_string(p.views[k].source));
+    }
+    EXPECT_GT(2 * own, p.views.size());
     // The plan measures every side and the top: each row above the plate predicted.
     const std::set<std::uint32_t> predicted(p.predicted_rows.begin(), p.predicted_rows.end());
     for (std::uint32_t r = 0; r < p.rough.size(); ++r) {
