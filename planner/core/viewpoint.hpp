@@ -14,7 +14,6 @@
 
 namespace scancell::planner {
 
-/// A generalized viewpoint (v, λs): pose (position, axis, twist) plus the sensor setting (scan length).
 /// Which generator made a candidate (the plan JSON's `source`): the optimal scanning zone (thesis ch. 6; on a
 /// cell-native cell, the views it expands each position into), a segment's single-best view (6.3.4), a
 /// replan's aim at what an open row lacks, a cell's view of a row nothing else measured, or a view along an
@@ -22,6 +21,7 @@ namespace scancell::planner {
 enum class ViewSource : std::uint8_t { optimal_zone, single_best, footprint_aim, self_aim, open_direction };
 const char* to_string(ViewSource s);
 
+/// A generalized viewpoint (v, λs): pose (position, axis, twist) plus the sensor setting (scan length).
 struct Viewpoint {
   Eigen::Vector3d position = Eigen::Vector3d::Zero();  // camera origin (laser rest position), object frame, mm
   Eigen::Vector3d axis = -Eigen::Vector3d::UnitZ();    // unit boresight (camera -z) in the object frame
