@@ -838,6 +838,7 @@ void cell_json(const ViewPlan& p, json& j) {
                               {"candidates", p.cell_generation.candidates},
                               {"elevation_clamped", p.cell_generation.clamped},
                               {"stepped_back", p.cell_generation.stepped_back},
+                              {"lowered_to_plate_height", p.cell_generation.lowered},
                               {"unreachable", p.cell_generation.unreachable},
                               {"colliding", p.cell_generation.colliding},
                               {"footprint_aims", p.cell_generation.footprint_aims},

@@ -52,11 +52,18 @@ struct Placed {
 
 /// The first of `steps` stand-offs, from `seed_standoff` out to `range_cap`, at which the view aimed at
 /// `target` with rotation `rotation(standoff)` and scan length `scan_length(standoff, step)` is reachable
-/// with the scanner body clear; `reachable` is set when the axes reached any of them.
+/// with the scanner body clear; `reachable` is set when the axes reached any of them. The body's collision
+/// does not depend on the axes, so it is tested first: on the arm every inverse kinematics is a numerical
+/// solve, and colliding stand-offs are solved only to tell "colliding" from "unreachable" when none is kept.
 template <class Rotation, class ScanLength>
 std::optional<Placed> first_clear_standoff(const CellModel& cell, const CollisionChecker& checker, const Eigen::Vector3d& target,
                                            double seed_standoff, double range_cap, int steps, Rotation rotation,
                                            ScanLength scan_length, bool& reachable) {
+  struct Pose {
+    Eigen::Isometry3d pose;
+    double scan;
+  };
+  std::vector<Pose> colliding;
   for (int step = 0; step < std::max(1, steps); ++step) {
     const double standoff = steps <= 1 ? seed_standoff : seed_standoff + (range_cap - seed_standoff) * step / (steps - 1);
     if (step > 0 && standoff <= seed_standoff) break;
@@ -66,13 +73,18 @@ std::optional<Placed> first_clear_standoff(const CellModel& cell, const Collisio
     Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
     pose.linear() = r;
     pose.translation() = target - standoff * b;
+    if (checker.collides(pose, scan)) {
+      colliding.push_back({pose, scan});
+      continue;
+    }
     if (!inverse_kinematics(cell, pose, scan).ok) continue;
     reachable = true;
-    if (checker.collides(pose, scan)) continue;
     Placed out{viewpoint_from_pose(r, pose.translation(), scan), step};
     out.view.standoff_mm = standoff;
     return out;
   }
+  for (const auto& c : colliding)
+    if (!reachable && inverse_kinematics(cell, c.pose, c.scan).ok) reachable = true;
   return std::nullopt;
 }
 
@@ -83,6 +95,20 @@ bool has_cell_native_viewpoints(const CellModel& cell) {
 }
 
 namespace {
+
+/// How far `p_table` (table frame) lies above the top of the highest table fixture under it (the plate), mm;
+/// nothing when no fixture lies under it or the point is not above the fixture's top.
+std::optional<double> height_over_table_fixture(const CellModel& cell, const Eigen::Vector3d& p_table) {
+  std::optional<double> top;
+  for (const auto& f : cell.fixtures) {
+    if (!f.on_table || (p_table.head<2>().array() < f.box.min.head<2>().array()).any() ||
+        (p_table.head<2>().array() > f.box.max.head<2>().array()).any())
+      continue;
+    if (!top || f.box.max.z() > *top) top = f.box.max.z();
+  }
+  if (!top || p_table.z() <= *top) return std::nullopt;
+  return p_table.z() - *top;
+}
 
 /// arm_turntable: the wrist takes any twist, so every free candidate (each twist and bisector tilt of each
 /// optimal-zone position) is a pose the cell may take as it is. Where the arm cannot reach it or the scanner
@@ -96,24 +122,40 @@ std::vector<Viewpoint> arm_viewpoints(const std::vector<Viewpoint>& seeds, const
   const Eigen::Matrix3d object_to_table = cell.object_on_table.linear();
   struct Out {
     std::optional<Viewpoint> view;
-    bool stepped = false, reachable = false;
+    bool stepped = false, lowered = false, reachable = false;
   };
   std::vector<Out> per(seeds.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, seeds.size(), 16), [&](const auto& range) {
     for (std::size_t k = range.begin(); k != range.end(); ++k) {
       const Viewpoint& seed = seeds[k];
       const Eigen::Vector3d target = seed.position + seed.standoff_mm * seed.axis;
-      // The seed's own rotation, then (looking up) the same lowered towards the horizontal.
-      std::vector<Eigen::Matrix3d> rotations = {seed.rotation()};
+      // The seed's own rotation, then (looking up) the same lowered towards the horizontal by cell_oblique_rad;
+      // either lowered further where its camera would stand below the top of the plate under the target (it
+      // would look through the plate: as turntable views, capped where the camera stays at the plate's height).
       const Eigen::Vector3d b_table = object_to_table * seed.axis;
-      if (b_table.z() > std::sin(st.cell_oblique_rad)) {
-        const Eigen::Vector3d about = object_to_table.transpose() * b_table.cross(Eigen::Vector3d::UnitZ()).normalized();
-        rotations.push_back(Eigen::AngleAxisd(st.cell_oblique_rad, about).toRotationMatrix() * seed.rotation());
-      }
+      const double elev = std::asin(std::clamp(b_table.z(), -1.0, 1.0));
+      const auto over_plate = height_over_table_fixture(cell, cell.object_on_table * target);
+      auto lowering_at = [&](double lowering, double standoff) {
+        return over_plate ? std::max(lowering, elev - std::asin(std::clamp(*over_plate / standoff, -1.0, 1.0))) : lowering;
+      };
+      std::vector<double> lowerings = {0.0};
+      if (b_table.z() > std::sin(st.cell_oblique_rad) && lowering_at(st.cell_oblique_rad, seed.standoff_mm) != lowering_at(0.0, seed.standoff_mm))
+        lowerings.push_back(st.cell_oblique_rad);
+      // Turning by a positive angle about Z × b lowers b (about b × Z, as before session 43, raised it: the
+      // "lowered" view looked up more steeply still).
+      Eigen::Vector3d about = Eigen::Vector3d::Zero();
+      if (b_table.head<2>().norm() > 1e-9)
+        about = object_to_table.transpose() * Eigen::Vector3d::UnitZ().cross(b_table).normalized();
+      auto rotation_at = [&](double lowering, double standoff) -> Eigen::Matrix3d {
+        const double by = lowering_at(lowering, standoff);
+        if (by <= 0.0 || about.isZero()) return seed.rotation();
+        return Eigen::AngleAxisd(by, about).toRotationMatrix() * seed.rotation();
+      };
       Out& o = per[k];
-      for (std::size_t n = 0; n < rotations.size() && !o.view; ++n) {
+      for (std::size_t n = 0; n < lowerings.size() && !o.view; ++n) {
         const auto placed = first_clear_standoff(
-            cell, checker, target, seed.standoff_mm, range_cap, st.cell_standoff_steps, [&](double) { return rotations[n]; },
+            cell, checker, target, seed.standoff_mm, range_cap, st.cell_standoff_steps,
+            [&](double standoff) { return rotation_at(lowerings[n], standoff); },
             [&](double standoff, int step) {
               return step == 0 ? seed.scan_length_mm : design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad);
             },
@@ -124,7 +166,8 @@ std::vector<Viewpoint> arm_viewpoints(const std::vector<Viewpoint>& seeds, const
         v.twist_level = seed.twist_level;
         v.tilt_rad = seed.tilt_rad;
         o.view = v;
-        o.stepped = placed->step > 0 || n > 0;
+        o.lowered = lowering_at(lowerings[n], v.standoff_mm) > lowerings[n];
+        o.stepped = placed->step > 0 || n > 0 || o.lowered;
       }
     }
   });
@@ -133,6 +176,7 @@ std::vector<Viewpoint> arm_viewpoints(const std::vector<Viewpoint>& seeds, const
     if (o.view) {
       out.push_back(*o.view);
       rep.stepped_back += o.stepped;
+      rep.lowered += o.lowered;
     } else {
       ++(o.reachable ? rep.colliding : rep.unreachable);
     }
@@ -147,7 +191,7 @@ namespace {
 /// What the expansion of aim points gives: the views kept, and why the others were not.
 struct Expanded {
   std::vector<Viewpoint> views;
-  std::size_t clamped = 0, stepped_back = 0, unreachable = 0, colliding = 0;
+  std::size_t clamped = 0, stepped_back = 0, lowered = 0, unreachable = 0, colliding = 0;
 };
 
 /// turntable_lift_tilt: the five views of one aim point (the thesis' view along its normal with the elevation
@@ -174,17 +218,31 @@ Expanded expand_aim(const AimPoint& a, const SensorModel& sensor, const ModelSpe
   double up = elev_c + st.cell_oblique_rad, down = elev_c - st.cell_oblique_rad;
   if (up > elev_max) up = elev_c - 2.0 * st.cell_oblique_rad;
   if (down < -elev_max) down = elev_c + 2.0 * st.cell_oblique_rad;
+  // A view looking up from below the plate's top at a point above it looks through the plate: a face turned
+  // to the plate is seen from the side instead, its elevation capped where the camera stays at the plate's
+  // height (then the sight line stays above the plate), at the cost of incidence (eq. 3.4's grazing limits
+  // decide whether that still measures it). Variants the cap makes one are tried once.
+  const auto over_plate = height_over_table_fixture(cell, cell.object_on_table * a.point);
+  auto elevation_at = [&](double elev, double standoff) {
+    return over_plate ? std::min(elev, std::asin(std::clamp(*over_plate / standoff, -1.0, 1.0))) : elev;
+  };
   // (elevation, yaw sign): the thesis' view, the bisector pair, the two oblique views.
   const std::pair<double, int> variants[] = {{elev_c, 0}, {elev_c, 1}, {elev_c, -1}, {up, 0}, {down, 0}};
-  int variant = 0;
+  std::vector<std::pair<double, int>> tried;
+  int variant = -1;
   for (const auto& [elev_raw, yaw_sign] : variants) {
+    ++variant;
     const double elev = std::clamp(elev_raw, -elev_max, elev_max);
+    const std::pair<double, int> at_seed{elevation_at(elev, a.standoff_mm), yaw_sign};
+    if (std::any_of(tried.begin(), tried.end(), [&](const auto& t) { return std::abs(t.first - at_seed.first) < 1e-9 && t.second == at_seed.second; }))
+      continue;
+    tried.push_back(at_seed);
     bool reachable = false;
     // The bisector's yaw is half the triangulation angle at the stand-off tried.
     auto yaw_at = [&](double standoff) { return yaw_sign * 0.5 * std::atan2(sensor.baseline_mm, standoff); };
     const auto placed = first_clear_standoff(
         cell, checker, a.point, a.standoff_mm, range_cap, st.cell_standoff_steps,
-        [&](double standoff) { return cell_frame(aim(b0, elev, yaw_at(standoff)), table_to_object); },
+        [&](double standoff) { return cell_frame(aim(b0, elevation_at(elev, standoff), yaw_at(standoff)), table_to_object); },
         [&](double standoff, int) { return design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad); },
         reachable);
     if (placed) {
@@ -194,10 +252,10 @@ Expanded expand_aim(const AimPoint& a, const SensorModel& sensor, const ModelSpe
       v.tilt_rad = yaw_at(v.standoff_mm);
       o.views.push_back(v);
       o.stepped_back += placed->step > 0;
+      o.lowered += elevation_at(elev, v.standoff_mm) < elev;
     } else {
       ++(reachable ? o.colliding : o.unreachable);
     }
-    ++variant;
   }
   return o;
 }
@@ -214,6 +272,7 @@ std::vector<Viewpoint> turntable_viewpoints(const std::vector<AimPoint>& aims, c
   for (auto& o : per) {
     rep.clamped += o.clamped;
     rep.stepped_back += o.stepped_back;
+    rep.lowered += o.lowered;
     rep.unreachable += o.unreachable;
     rep.colliding += o.colliding;
     out.insert(out.end(), o.views.begin(), o.views.end());

@@ -36,7 +36,10 @@ struct CellGenerationReport {
   std::size_t seeds = 0;         // optimal-zone positions expanded
   std::size_t candidates = 0;    // kept
   std::size_t clamped = 0;       // boresight steeper than the tilt range, clamped
-  std::size_t stepped_back = 0;  // kept at a longer stand-off to clear the object or the plate
+  std::size_t stepped_back = 0;  // kept at a longer stand-off to clear the object or the plate, or lowered
+  /// kept with the elevation lowered so that the camera stands no lower than the top of the plate under the
+  /// target (a view from below it looks through the plate)
+  std::size_t lowered = 0;
   std::size_t unreachable = 0;   // no twist sign the axes reach
   std::size_t colliding = 0;     // collides at every stand-off tried
   std::size_t footprint_aims = 0, footprint_candidates = 0;  // replans: points aimed at what open rows lack, views kept

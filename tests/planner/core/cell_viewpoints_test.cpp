@@ -8,6 +8,7 @@
 
 #include "planner/kinematics/cell.hpp"
 #include "planner/core/cell_viewpoints.hpp"
+#include "planner/core/measurability.hpp"
 #include "planner/core/rough_model.hpp"
 #include "planner/geometry/scene.hpp"
 #include "test_meshes.hpp"
@@ -138,12 +139,15 @@ TEST(CellViewpoints, TheArmKeepsFreeCandidatesAndStepsBackTheOnesThatWouldHitThe
   EXPECT_EQ(report.seeds, seeds.size());
   EXPECT_EQ(report.candidates, views.size());
   EXPECT_EQ(report.candidates + report.unreachable + report.colliding, seeds.size());
-  // What projection would keep: the seeds the arm reaches exactly with the body clear.
+  // What projection would keep: the seeds the arm reaches exactly with the body clear, but for those whose
+  // camera stands below the plate's top (z = 0) aiming above it, which look through the plate and are lowered.
   std::size_t as_is = 0;
   for (const auto& s : seeds) {
     Eigen::Isometry3d p;
     p.matrix() = s.transform();
-    as_is += sp::inverse_kinematics(cell, p, s.scan_length_mm).ok && !checker.collides(p, s.scan_length_mm);
+    const Eigen::Vector3d target = s.position + s.standoff_mm * s.axis;
+    const bool through_plate = s.position.z() < 0.0 && target.z() > 0.0;
+    as_is += !through_plate && sp::inverse_kinematics(cell, p, s.scan_length_mm).ok && !checker.collides(p, s.scan_length_mm);
   }
   EXPECT_GT(report.stepped_back, 0u);
   EXPECT_EQ(views.size(), as_is + report.stepped_back);
@@ -245,4 +249,49 @@ TEST(OpenAims, AFaceOnThePlateAndASlotFloorAreClosedTheRestOpen) {
   const std::vector<sp::AimPoint> no_normal{{{0, 0, 0}, Eigen::Vector3d::Zero(), 150, 9}};
   EXPECT_EQ(sp::aims_open_to_sensor(no_normal, on_plate, b.sensor, 0.01).size(), 1u);  // not judged, kept
   EXPECT_THROW(sp::aims_open_to_sensor(aims, on_plate, b.sensor, 0.01, nullptr, 0), std::invalid_argument);
+}
+
+// A face turned to the plate, low above it (the underside of a part that flares out from its foot): a slope
+// whose normal points 26.6° below the horizontal, from the plate top up to 40 mm. The thesis' view along the
+// normal looks up from 65 mm below the point, and the oblique views 20° above and below it from 10-16 mm
+// below: all look through the plate. The view is capped where its camera stands at the plate's height (the
+// elevation asin(h / d) for a point h above the plate at stand-off d), and then measures the point at
+// 26.6° − asin(h / d) incidence. On both cells, every row of the slope's lowest 10 mm gets such a view.
+TEST(CellViewpoints, AFaceTurnedToThePlateIsSeenFromThePlatesHeightNotThroughIt) {
+  sp::TriangleMesh slope;
+  const Eigen::Vector3d up_slope = Eigen::Vector3d(20.0, 0.0, 40.0).normalized();  // from x = 30 at z = 0 to x = 50 at z = 40
+  sp::testing::add_grid(slope, {30.0, -30.0, 0.0}, Eigen::Vector3d::UnitY(), up_slope, 13, 10, 5.0);
+  const sp::RoughModel rough = sp::make_rough_model(slope);
+  const Eigen::Vector3d normal = Eigen::Vector3d::UnitY().cross(up_slope);  // (0.894, 0, −0.447)
+  ASSERT_NEAR(std::asin(normal.z()), -std::atan(0.5), 1e-12);
+  for (const char* file : {"config/cells/turntable-lift-tilt.yaml", "config/cells/arm-turntable.yaml"}) {
+    SCOPED_TRACE(file);
+    const sp::CellModel cell = sp::load_cell(sp::testing::source_path(file));
+    const sp::SensorModel sensor = sp::testing::thesis_sensor();
+    const sp::ModelSpec spec = sp::testing::thesis_spec();
+    const sp::ViewpointSettings settings;
+    const sp::OcclusionScene scene(sp::with_fixtures(rough.mesh(), cell));
+    const sp::CollisionChecker checker(cell, rough.mesh());
+    std::size_t low_rows = 0;
+    for (std::uint32_t r = 0; r < rough.size(); ++r) {
+      const double h = rough.points[r].z();  // the plate's top is the table's z = 0, the object frame's too
+      if (h <= 1.0 || h > 10.0 || std::abs(rough.points[r].y()) > 20.0) continue;
+      ++low_rows;
+      ASSERT_NEAR(rough.normals[r].dot(normal), 1.0, 1e-9);
+      const auto views = sp::cell_viewpoints_at({{rough.points[r], rough.normals[r], 1.02 * sensor.optimal_standoff_mm, static_cast<std::int32_t>(r)}},
+                                                sensor, spec, settings, cell, checker);
+      ASSERT_FALSE(views.empty()) << "row at h " << h;
+      // The first view: the thesis' view capped at the plate's height, elevation asin(h / d).
+      const sp::Viewpoint& v = views.front();
+      EXPECT_NEAR(std::asin(v.axis.z()), std::asin(h / v.standoff_mm), 1e-9) << "h " << h;
+      EXPECT_NEAR(v.position.z(), 0.0, 1e-9);
+      std::size_t measuring = 0;
+      for (const auto& w : views) {
+        EXPECT_GE(w.position.z(), -1e-9);  // no camera below the plate's top
+        measuring += sp::measurable(rough, scene, sensor, spec, w, r);
+      }
+      EXPECT_GE(measuring, 1u) << "row at h " << h;
+    }
+    EXPECT_GE(low_rows, 9u);
+  }
 }
