@@ -36,7 +36,9 @@ struct CellGenerationReport {
   std::size_t seeds = 0;         // optimal-zone positions expanded
   std::size_t candidates = 0;    // kept
   std::size_t clamped = 0;       // boresight steeper than the tilt range, clamped
-  std::size_t stepped_back = 0;  // kept at a longer stand-off to clear the object or the plate, or lowered
+  /// kept at a longer stand-off to clear the object or the plate; on arm_turntable also every view kept
+  /// lowered (by cell_oblique_rad, or as `lowered`), so that seeds = kept as they are + this + dropped
+  std::size_t stepped_back = 0;
   /// kept with the elevation lowered so that the camera stands no lower than the top of the plate under the
   /// target (a view from below it looks through the plate)
   std::size_t lowered = 0;
