@@ -110,6 +110,12 @@ std::optional<double> height_over_table_fixture(const CellModel& cell, const Eig
   return p_table.z() - *top;
 }
 
+/// The steepest upward elevation of a view `standoff_mm` from a target `over_plate_mm` above the plate's top
+/// (height_over_table_fixture) whose camera stands no lower than that top: its sight line stays above the plate.
+double plate_height_elevation(double over_plate_mm, double standoff_mm) {
+  return std::asin(std::clamp(over_plate_mm / standoff_mm, -1.0, 1.0));
+}
+
 /// arm_turntable: the wrist takes any twist, so every free candidate (each twist and bisector tilt of each
 /// optimal-zone position) is a pose the cell may take as it is. Where the arm cannot reach it or the scanner
 /// body would hit the object or the plate, it steps back along its boresight towards the precision-limited
@@ -136,7 +142,7 @@ std::vector<Viewpoint> arm_viewpoints(const std::vector<Viewpoint>& seeds, const
       const double elev = std::asin(std::clamp(b_table.z(), -1.0, 1.0));
       const auto over_plate = height_over_table_fixture(cell, cell.object_on_table * target);
       auto lowering_at = [&](double lowering, double standoff) {
-        return over_plate ? std::max(lowering, elev - std::asin(std::clamp(*over_plate / standoff, -1.0, 1.0))) : lowering;
+        return over_plate ? std::max(lowering, elev - plate_height_elevation(*over_plate, standoff)) : lowering;
       };
       std::vector<double> lowerings = {0.0};
       if (b_table.z() > std::sin(st.cell_oblique_rad) && lowering_at(st.cell_oblique_rad, seed.standoff_mm) != lowering_at(0.0, seed.standoff_mm))
@@ -224,7 +230,7 @@ Expanded expand_aim(const AimPoint& a, const SensorModel& sensor, const ModelSpe
   // decide whether that still measures it). Variants the cap makes one are tried once.
   const auto over_plate = height_over_table_fixture(cell, cell.object_on_table * a.point);
   auto elevation_at = [&](double elev, double standoff) {
-    return over_plate ? std::min(elev, std::asin(std::clamp(*over_plate / standoff, -1.0, 1.0))) : elev;
+    return over_plate ? std::min(elev, plate_height_elevation(*over_plate, standoff)) : elev;
   };
   // (elevation, yaw sign): the thesis' view, the bisector pair, the two oblique views.
   const std::pair<double, int> variants[] = {{elev_c, 0}, {elev_c, 1}, {elev_c, -1}, {up, 0}, {down, 0}};
