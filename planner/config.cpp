@@ -11,6 +11,7 @@
 
 #include "common/yaml_section.hpp"
 
+#include "planner/kinematics/arm_ik.hpp"
 #include "planner/kinematics/cell.hpp"
 #include "common/errors.hpp"
 
@@ -378,6 +379,14 @@ void read_arm(Section arm, CellModel& c) {
     }
     c.dh.push_back(row);
   }
+  const std::string ik = arm.get_or<std::string>("ik", "automatic");
+  if (ik == "automatic") c.arm_ik = ArmIkSolver::automatic;
+  else if (ik == "numerical") c.arm_ik = ArmIkSolver::numerical;
+  else if (ik == "closed_form") c.arm_ik = ArmIkSolver::closed_form;
+  else arm.fail(arm.key_path("ik"), "must be automatic, closed_form or numerical, got '" + ik + "'");
+  if (c.arm_ik == ArmIkSolver::closed_form && !has_ur_geometry(c.dh))
+    arm.fail(arm.key_path("ik"), "closed_form needs the Universal Robots geometry (a1 = a4 = a5 = a6 = 0, d2 = d3 = 0, alpha = "
+                                 "pi/2, 0, 0, pi/2, -pi/2, 0; a2, a3, d6 not 0), which dh does not have; use automatic or numerical");
   arm.finish();
 }
 

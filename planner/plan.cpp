@@ -387,7 +387,8 @@ std::vector<JointVector> axis_targets(const ViewPlan& p, const std::vector<Viewp
 /// The cover (thesis ch. 4): exact (CBC) when asked, else constrained greedy improved by the local search;
 /// with a cell, then ordered for the least travel from home, with each view's move and scan time. The axis
 /// targets (inverse kinematics) of every candidate only for exact cover's costs, else of the chosen views: on
-/// arm_turntable each is a numerical IK solve, and 27k of them took 1.7-1.9 s of a 5k-row plan (fandisk, cow).
+/// arm_turntable each was a numerical IK solve, and 27k of them took 1.7-1.9 s of a 5k-row plan (fandisk, cow);
+/// the shipped arm is solved in closed form since (kinematics/arm_ik.hpp), an arm of another geometry is not.
 void choose_cover(ViewPlan& p, const MeasurabilityMatrix& matrix, const std::vector<double>& row_weight,
                   const std::vector<Viewpoint>& candidates) {
   std::vector<JointVector> q_of;

@@ -17,6 +17,7 @@
 #include <kdl/frames.hpp>
 
 #include "common/errors.hpp"
+#include "planner/kinematics/arm_ik.hpp"
 
 namespace scancell::planner {
 namespace {
@@ -82,6 +83,10 @@ double pose_error(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
 }
 
 }  // namespace
+
+bool CellModel::arm_ik_closed_form() const {
+  return arm_ik == ArmIkSolver::closed_form || (arm_ik == ArmIkSolver::automatic && has_ur_geometry(dh));
+}
 
 Eigen::Isometry3d table_to_world(const CellModel& c, double angle) {
   if (c.nominal_table_axis()) return rot_z(angle);
@@ -239,19 +244,85 @@ void polish_arm(KDL::ChainFkSolverPos_recursive& fk, KDL::ChainJntToJacSolver& j
 /// that plan 45 s -> 15 s.
 constexpr unsigned kArmLmaIterations = 300;
 
-/// arm_turntable: turn the object so the camera stands on the arm's side, then solve the arm (KDL LMA) from a
-/// few seeds; accept only exact solutions within the joint limits.
-IkResult ik_arm(const CellModel& c, const Eigen::Isometry3d& desired, const Eigen::Isometry3d& camera_to_table, const JointVector& near) {
-  IkResult res;
-  const Axis& table = c.axes[0];
-  const KDL::Chain chain = arm_chain(c);
+/// An arm solution `out` (joint angles of the chain) at turntable angle `theta`, polished, wrapped into the
+/// joint limits nearest `near` and checked by forward kinematics against `desired`; nothing when it fails.
+std::optional<JointVector> accept_arm_solution(const CellModel& c, double theta, KDL::JntArray out, const Eigen::Isometry3d& desired,
+                                               const Eigen::Isometry3d& flange, const JointVector& near,
+                                               KDL::ChainFkSolverPos_recursive& fk, KDL::ChainJntToJacSolver& jacobian) {
+  polish_arm(fk, jacobian, flange, out);
+  JointVector q(7);
+  q[0] = theta;
+  for (int k = 0; k < 6; ++k) {
+    const auto w = wrap_into(out(k), c.axes[1 + k].min, c.axes[1 + k].max, near[1 + k]);
+    if (!w) return std::nullopt;
+    q[1 + k] = *w;
+  }
+  if (pose_error(forward_kinematics(c, q), desired) > kTol) return std::nullopt;
+  return q;
+}
+
+/// The Universal Robots geometry in closed form (arm_ik.hpp): of every branch within the joint limits, the one
+/// the axes reach soonest from `near`.
+std::optional<JointVector> ur_arm_solution(const CellModel& c, double theta, const Eigen::Isometry3d& desired,
+                                           const Eigen::Isometry3d& flange, const JointVector& near,
+                                           KDL::ChainFkSolverPos_recursive& fk, KDL::ChainJntToJacSolver& jacobian) {
+  std::optional<JointVector> best;
+  double best_time = 0.0;
+  for (const auto& branch : ur_inverse_kinematics(c.dh, flange, near[6])) {
+    KDL::JntArray out(6);
+    for (int k = 0; k < 6; ++k) out(k) = branch[k];
+    const auto q = accept_arm_solution(c, theta, out, desired, flange, near, fk, jacobian);
+    if (!q) continue;
+    const double t = move_time_s(c, near, *q);
+    if (!best || t < best_time) {
+      best = q;
+      best_time = t;
+    }
+  }
+  return best;
+}
+
+/// Any other DH chain: KDL's LMA from a few seeds about `near`, the first exact solution within the limits.
+std::optional<JointVector> lma_arm_solution(const CellModel& c, const KDL::Chain& chain, double theta, const Eigen::Isometry3d& desired,
+                                            const Eigen::Isometry3d& flange, const JointVector& near,
+                                            KDL::ChainFkSolverPos_recursive& fk, KDL::ChainJntToJacSolver& jacobian) {
   // LMA's own verdict is not the test (it reports "increment too small" at a converged pose); the FK error is.
   // Weights: positions in mm, rotations in rad scaled by a 1 m lever, so both converge to 1e-9 at the camera.
   Eigen::Matrix<double, 6, 1> weights;
   weights << 1.0, 1.0, 1.0, 1000.0, 1000.0, 1000.0;
-  KDL::ChainIkSolverPos_LMA ik(chain, weights, 1e-20, kArmLmaIterations, 1e-15);
+  KDL::ChainIkSolverPos_LMA ik(chain, weights, 1e-20, kArmLmaIterations, 1e-15);  // keeps a reference to chain
+  KDL::JntArray s0(6);
+  for (int k = 0; k < 6; ++k) s0(k) = near[1 + k];
+  std::vector<KDL::JntArray> seeds{s0};
+  for (double off : {0.8, -0.8, 1.6}) {
+    KDL::JntArray s = s0;
+    s(0) += off;
+    s(2) -= 0.5 * off;
+    seeds.push_back(s);
+  }
+  for (const auto& s : seeds) {
+    KDL::JntArray out(6);
+    // LMA can stall at ~1e-5 far from its seed; accept_arm_solution polishes from where it stopped (quadratically
+    // close to the solution).
+    ik.CartToJnt(s, to_kdl(flange), out);
+    if (auto q = accept_arm_solution(c, theta, out, desired, flange, near, fk, jacobian)) return q;
+  }
+  return std::nullopt;
+}
+
+/// arm_turntable: turn the object so the camera stands on the arm's side, then solve the arm; accept only exact
+/// solutions within the joint limits.
+IkResult ik_arm(const CellModel& c, const Eigen::Isometry3d& desired, const Eigen::Isometry3d& camera_to_table, const JointVector& near) {
+  IkResult res;
+  const Axis& table = c.axes[0];
+  const KDL::Chain chain = arm_chain(c);
   KDL::ChainFkSolverPos_recursive fk(chain);
   KDL::ChainJntToJacSolver jacobian(chain);
+  if (c.arm_ik == ArmIkSolver::closed_form && !has_ur_geometry(c.dh)) {
+    res.why = "arm: closed-form inverse kinematics needs the Universal Robots geometry (arm.ik)";
+    return res;
+  }
+  const bool closed_form = c.arm_ik_closed_form();
   const Eigen::Vector3d p = camera_to_table.translation();
   const double arm_azimuth = std::atan2(c.arm_base.translation().y(), c.arm_base.translation().x());
   const double base_theta = arm_azimuth - std::atan2(p.y(), p.x());
@@ -259,35 +330,11 @@ IkResult ik_arm(const CellModel& c, const Eigen::Isometry3d& desired, const Eige
     const auto theta = wrap_into(base_theta + dtheta, table.min, table.max, near[0]);
     if (!theta) continue;
     const Eigen::Isometry3d flange = c.arm_base.inverse() * table_to_world(c, *theta) * camera_to_table * c.tool.inverse();
-    const KDL::Frame target = to_kdl(flange);
-    std::vector<KDL::JntArray> seeds;
-    KDL::JntArray s0(6);
-    for (int k = 0; k < 6; ++k) s0(k) = near[1 + k];
-    seeds.push_back(s0);
-    for (double off : {0.8, -0.8, 1.6}) {
-      KDL::JntArray s = s0;
-      s(0) += off;
-      s(2) -= 0.5 * off;
-      seeds.push_back(s);
-    }
-    for (const auto& s : seeds) {
-      KDL::JntArray out(6);
-      ik.CartToJnt(s, target, out);
-      // LMA can stall at ~1e-5 far from its seed; polishing from where it stopped converges (quadratically
-      // close to the solution).
-      polish_arm(fk, jacobian, to_eigen(target), out);
-      JointVector q(7);
-      q[0] = *theta;
-      bool ok = true;
-      for (int k = 0; k < 6 && ok; ++k) {
-        const auto w = wrap_into(out(k), c.axes[1 + k].min, c.axes[1 + k].max, near[1 + k]);
-        if (!w) ok = false;
-        else q[1 + k] = *w;
-      }
-      if (!ok) continue;
-      if (pose_error(forward_kinematics(c, q), desired) > kTol) continue;
+    const auto q = closed_form ? ur_arm_solution(c, *theta, desired, flange, near, fk, jacobian)
+                               : lma_arm_solution(c, chain, *theta, desired, flange, near, fk, jacobian);
+    if (q) {
       res.ok = true;
-      res.q = q;
+      res.q = *q;
       return res;
     }
   }

@@ -9,8 +9,9 @@
 //   radial axis (world X), a vertical lift (world Z) and a tilt about a horizontal axis parallel to world Y,
 //   and a linear sweep along world Y produces the line-scan motion (camera y = world +Y, always). Closed-form
 //   inverse kinematics.
-// - arm_turntable: a 6-axis arm (Denavit-Hartenberg chain, solved with orocos-kdl) carries the scanner, the
-//   object turns on a turntable; the turntable angle is chosen so the camera stands on the arm's side.
+// - arm_turntable: a 6-axis arm (Denavit-Hartenberg chain: closed form for the Universal Robots geometry,
+//   arm_ik.hpp, else orocos-kdl's LMA) carries the scanner, the object turns on a turntable; the turntable
+//   angle is chosen so the camera stands on the arm's side.
 #include <array>
 #include <filesystem>
 #include <optional>
@@ -37,6 +38,10 @@ struct Axis {
 };
 
 enum class CellKinematics { turntable_lift_tilt, arm_turntable };
+
+/// How an arm_turntable cell solves its arm (config `arm.ik`): closed form needs the Universal Robots geometry
+/// (arm_ik.hpp); automatic takes it when the DH table has it, else the numerical solver (KDL's LMA).
+enum class ArmIkSolver { automatic, closed_form, numerical };
 
 struct Box {
   Eigen::Vector3d min = Eigen::Vector3d::Zero(), max = Eigen::Vector3d::Zero();
@@ -73,6 +78,8 @@ struct CellModel {
   std::vector<std::array<double, 4>> dh;   // per arm joint: a_mm, alpha_rad, d_mm, theta_offset_rad
   Eigen::Isometry3d arm_base = Eigen::Isometry3d::Identity();  // arm base in the world
   Eigen::Isometry3d tool = Eigen::Isometry3d::Identity();      // camera frame in the flange frame
+  ArmIkSolver arm_ik = ArmIkSolver::automatic;
+  bool arm_ik_closed_form() const;  // the solver automatic resolves to
 
   std::size_t axis_index(const std::string& name) const;  // throws ConfigError when absent
   JointVector home() const;
