@@ -150,9 +150,12 @@ inline std::size_t views_to(const std::vector<double>& prog, double target) {
   return 0;
 }
 
-/// Move + sweep time of views executed in least-travel order from home (their axis targets by IK).
+/// Move + sweep time of views executed in least-travel order from home (their axis targets by IK from home,
+/// re-solved along the tour by plan_travel, as the plan's own are).
 inline double cell_time_s(const sp::CellModel& cell, const std::vector<sp::Viewpoint>& views) {
   std::vector<sp::JointVector> q;
+  std::vector<Eigen::Isometry3d> poses;
+  std::vector<double> scan_mm;
   double scan = 0.0;
   for (const auto& v : views) {
     Eigen::Isometry3d pose;
@@ -160,17 +163,12 @@ inline double cell_time_s(const sp::CellModel& cell, const std::vector<sp::Viewp
     const auto ik = sp::inverse_kinematics(cell, pose, v.scan_length_mm);
     if (!ik.ok) continue;
     q.push_back(ik.q);
+    poses.push_back(pose);
+    scan_mm.push_back(v.scan_length_mm);
     scan += sp::scan_time_s(cell, v.scan_length_mm);
   }
   if (q.empty()) return scan;
-  const auto order = sp::travel_order(cell, q, cell.home());
-  double move = 0.0;
-  sp::JointVector at = cell.home();
-  for (auto k : order) {
-    move += sp::move_time_s(cell, at, q[k]);
-    at = q[k];
-  }
-  return move + scan;
+  return sp::plan_travel(cell, poses, scan_mm, std::move(q), cell.home()).move_s + scan;
 }
 
 

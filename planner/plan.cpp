@@ -418,12 +418,22 @@ void choose_cover(ViewPlan& p, const MeasurabilityMatrix& matrix, const std::vec
   }
   if (!p.cell || p.cover.views.empty()) return;
   if (q_of.empty()) q_of = axis_targets(p, candidates, &p.cover.views);
-  // Execute in the order that minimises travel from home; the cumulative figures follow that order.
+  // Execute in the order that minimises travel from home, each view solved from the one before it (the
+  // table's turn, the arm's branch); the cumulative figures follow that order.
   std::vector<JointVector> targets;
-  for (auto j : p.cover.views) targets.push_back(q_of[j]);
-  const auto order = travel_order(*p.cell, targets, p.cell->home());
+  std::vector<Eigen::Isometry3d> poses;
+  std::vector<double> scan_mm;
+  for (auto j : p.cover.views) {
+    targets.push_back(q_of[j]);
+    poses.emplace_back(candidates[j].transform());
+    scan_mm.push_back(candidates[j].scan_length_mm);
+  }
+  const Travel travel = plan_travel(*p.cell, poses, scan_mm, std::move(targets), p.cell->home());
   std::vector<std::uint32_t> ordered;
-  for (auto k : order) ordered.push_back(p.cover.views[k]);
+  for (auto k : travel.order) {
+    ordered.push_back(p.cover.views[k]);
+    q_of[p.cover.views[k]] = travel.targets[k];
+  }
   CoverResult re = describe_cover(matrix, row_weight, p.settings.cover, ordered);
   re.blocked_by_registration = p.cover.blocked_by_registration;
   re.bridge_views = p.cover.bridge_views;

@@ -534,4 +534,45 @@ std::vector<std::size_t> travel_order(const CellModel& c, const std::vector<Join
   return order;
 }
 
+namespace {
+
+double tour_move_s(const CellModel& c, const std::vector<JointVector>& targets, const std::vector<std::size_t>& order,
+                   const JointVector& start) {
+  double t = 0.0;
+  const JointVector* at = &start;
+  for (const auto k : order) {
+    t += move_time_s(c, *at, targets[k]);
+    at = &targets[k];
+  }
+  return t;
+}
+
+}  // namespace
+
+Travel plan_travel(const CellModel& c, const std::vector<Eigen::Isometry3d>& poses, const std::vector<double>& scan_length_mm,
+                   std::vector<JointVector> targets, const JointVector& start, int rounds) {
+  if (poses.size() != targets.size() || scan_length_mm.size() != targets.size())
+    throw std::invalid_argument("plan_travel: one pose, scan length and target per view");
+  Travel best;
+  best.order = travel_order(c, targets, start);
+  best.targets = std::move(targets);
+  best.move_s = tour_move_s(c, best.targets, best.order, start);
+  for (int round = 0; round < rounds; ++round) {
+    // Solved from the view before, a view may take another turn of the table or another arm branch: the
+    // same camera pose, a shorter move. Every target stays an exact solution (a failed re-solve keeps its own).
+    std::vector<JointVector> again = best.targets;
+    const JointVector* at = &start;
+    for (const auto k : best.order) {
+      const IkResult r = inverse_kinematics(c, poses[k], scan_length_mm[k], at);
+      if (r.ok) again[k] = r.q;
+      at = &again[k];
+    }
+    std::vector<std::size_t> order = travel_order(c, again, start);
+    const double t = tour_move_s(c, again, order, start);
+    if (!(t < best.move_s - 1e-9)) break;
+    best = {std::move(order), std::move(again), t};
+  }
+  return best;
+}
+
 }  // namespace scancell::planner

@@ -155,4 +155,18 @@ TriangleMesh with_fixtures(const TriangleMesh& object, const CellModel& cell);
 std::vector<std::size_t> travel_order(const CellModel& cell, const std::vector<JointVector>& targets,
                                       const JointVector& start);
 
+/// Views executed in turn: the order, each view's axis targets and the summed move time (s).
+struct Travel {
+  std::vector<std::size_t> order;
+  std::vector<JointVector> targets;  // per view (in the views' own order, not the execution order)
+  double move_s = 0.0;
+};
+
+/// travel_order over `targets` (exact solutions for the camera poses `poses`, e.g. solved from home), then
+/// each view re-solved from the one before it in that order (the turntable's angle modulo 2π and the arm's
+/// branch nearest it) and ordered again, for as long as the total move time falls (at most `rounds` times).
+/// Never slower than travel_order over `targets`; deterministic.
+Travel plan_travel(const CellModel& cell, const std::vector<Eigen::Isometry3d>& poses, const std::vector<double>& scan_length_mm,
+                   std::vector<JointVector> targets, const JointVector& start, int rounds = 3);
+
 }  // namespace scancell::planner

@@ -150,6 +150,33 @@ TEST(Cell, TravelOrderVisitsAlongTheShortestTour) {
   EXPECT_EQ(order, (std::vector<std::size_t>{1, 3, 2, 4, 0}));  // 200, 300, 400, 500, 600
 }
 
+TEST(Cell, TheTourSolvesEachViewFromTheOneBefore) {
+  // Two views the table serves at +3.0 and -3.0 rad (the other axes at home). Solved from home (table 0) the
+  // second is -3.0, 6 rad from the first; solved from the first it is -3.0 + 2π = 3.2832, 0.2832 rad on.
+  // Table 1 rad/s, 2 rad/s² (0.5 rad to full speed and back): 3 rad takes 3/1 + 1/2 = 3.5 s, 6 rad 6.5 s,
+  // 0.2832 rad (triangular) 2·sqrt(0.2832/2) = 0.7526 s.
+  const auto c = cell("turntable-lift-tilt");
+  std::vector<Eigen::Isometry3d> poses;
+  std::vector<sp::JointVector> from_home;
+  for (double table : {3.0, -3.0}) {
+    sp::JointVector q = c.home();
+    q[0] = table;
+    poses.push_back(sp::forward_kinematics(c, q));
+    const auto ik = sp::inverse_kinematics(c, poses.back(), 40.0);
+    ASSERT_TRUE(ik.ok) << ik.why;
+    from_home.push_back(ik.q);
+  }
+  EXPECT_NEAR(from_home[1][0], -3.0, 1e-9);
+  const auto order = sp::travel_order(c, from_home, c.home());
+  EXPECT_NEAR(sp::move_time_s(c, c.home(), from_home[order[0]]) + sp::move_time_s(c, from_home[order[0]], from_home[order[1]]), 10.0, 1e-9);
+  const sp::Travel t = sp::plan_travel(c, poses, {40.0, 40.0}, from_home, c.home());
+  EXPECT_EQ(t.order, (std::vector<std::size_t>{0, 1}));
+  EXPECT_NEAR(t.targets[1][0], -3.0 + 2.0 * M_PI, 1e-9);
+  EXPECT_NEAR(t.move_s, 3.5 + 2.0 * std::sqrt((2.0 * M_PI - 6.0) / 2.0), 1e-9);
+  EXPECT_LT(pose_distance(sp::forward_kinematics(c, t.targets[1]), poses[1]), 1e-9);  // the same camera pose
+  EXPECT_THROW(sp::plan_travel(c, poses, {40.0}, from_home, c.home()), std::invalid_argument);
+}
+
 TEST(Cell, ScannerBodyCollisionsRespectTheClearance) {
   const auto c = cell("turntable-lift-tilt");
   const sp::TriangleMesh box = sp::box_with_blind_hole({120, 80, 60}, 30, 30, 10.0);
