@@ -1,43 +1,25 @@
 // The arm cell's inverse kinematics: closed form (the Universal Robots geometry, planner/kinematics/arm_ik.hpp)
 // against the numerical solver (KDL's LMA from a few seeds, then Newton), on the same camera poses, in the same
-// run. The poses are drawn as the planner makes views: 200-400 mm from a point 80 mm above the plate, from any
-// azimuth, at elevations from -10° to 75°, with any twist. Prints, per solver, the poses solved, the solves per
-// second (one thread) and the time ratio; and the poses one solver reaches and the other does not.
+// run. The poses are drawn as the planner makes views (sim/synthetic.hpp view_like_poses: 200-400 mm from a
+// point 80 mm above the plate, any azimuth, elevations from -10° to 75°, any twist). Prints, per solver, the
+// poses solved, the solves per second (one thread) and the time ratio; and the poses one solver reaches and the
+// other does not (exit 1 when the numerical solver reaches one the closed form misses).
 //   bench_ik [--cell FILE] [--poses N] [--seed S]
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <random>
 #include <string>
 #include <vector>
 
 #include "planner/kinematics/cell.hpp"
-#include "planner/core/viewpoint.hpp"
+#include "planner/sim/synthetic.hpp"
 
 namespace sp = scancell::planner;
 using Clock = std::chrono::steady_clock;
 
 namespace {
-
-std::vector<Eigen::Isometry3d> planner_like_poses(int n, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> el(-0.17, 1.3), az(-M_PI, M_PI), dist(200, 400), tw(-M_PI, M_PI);
-  std::vector<Eigen::Isometry3d> out;
-  for (int k = 0; k < n; ++k) {
-    const double e = el(rng), a = az(rng);
-    const Eigen::Vector3d dir(std::cos(e) * std::cos(a), std::cos(e) * std::sin(a), std::sin(e));
-    sp::Viewpoint v;
-    v.position = Eigen::Vector3d(0, 0, 80) + dist(rng) * dir;
-    v.axis = -dir;
-    v.twist_rad = tw(rng);
-    Eigen::Isometry3d pose;
-    pose.matrix() = v.transform();
-    out.push_back(pose);
-  }
-  return out;
-}
 
 struct Run {
   std::vector<char> solved;
@@ -91,7 +73,7 @@ int main(int argc, char** argv) {
   closed.arm_ik = sp::ArmIkSolver::closed_form;
   sp::CellModel numerical = closed;
   numerical.arm_ik = sp::ArmIkSolver::numerical;
-  const auto poses = planner_like_poses(n, seed);
+  const auto poses = sp::view_like_poses(n, seed);
   const Run c = solve_all(closed, poses), m = solve_all(numerical, poses);
   int both = 0, only_closed = 0, only_numerical = 0, solved_c = 0, solved_m = 0;
   for (int i = 0; i < n; ++i) {

@@ -4,6 +4,7 @@
 #include <functional>
 #include <map>
 #include <numbers>
+#include <random>
 #include <stdexcept>
 #include <tuple>
 
@@ -161,6 +162,23 @@ TriangleMesh cylinder_with_bore(double od, double bd, double height, double sp) 
   add_grid(m, nt, nr, true, [&](int k, int j) { return ring(ri + (ro - ri) * j / nr, k, height); }, constant(Eigen::Vector3d::UnitZ()));
   add_grid(m, nt, nr, true, [&](int k, int j) { return ring(ri + (ro - ri) * j / nr, k, 0.0); }, constant(-Eigen::Vector3d::UnitZ()));
   return weld(m, 1e-6);
+}
+
+std::vector<Eigen::Isometry3d> view_like_poses(int count, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> el(-0.17, 1.3), az(-std::numbers::pi, std::numbers::pi), dist(200, 400),
+      tw(-std::numbers::pi, std::numbers::pi);
+  std::vector<Eigen::Isometry3d> out;
+  for (int k = 0; k < count; ++k) {
+    const double e = el(rng), a = az(rng);
+    const Eigen::Vector3d dir(std::cos(e) * std::cos(a), std::cos(e) * std::sin(a), std::sin(e));
+    Viewpoint v;
+    v.position = Eigen::Vector3d(0, 0, 80) + dist(rng) * dir;
+    v.axis = -dir;
+    v.twist_rad = tw(rng);
+    out.emplace_back(v.transform());
+  }
+  return out;
 }
 
 }  // namespace scancell::planner

@@ -31,4 +31,9 @@ TriangleMesh cylinder_with_bore(double outer_diameter_mm, double bore_diameter_m
 /// Merges vertices closer than `tolerance_mm` (the generators build faces separately) and drops unused ones.
 TriangleMesh weld(const TriangleMesh& mesh, double tolerance_mm = 1e-6);
 
+/// Camera poses as the planner makes views of a 200 mm object on a cell: `count` of them, 200-400 mm from a point
+/// 80 mm above the plate (object frame), from any azimuth, at elevations from -10° to 75°, with any twist,
+/// looking at that point. Repeatable for a `seed` (for inverse-kinematics tests and bench_ik).
+std::vector<Eigen::Isometry3d> view_like_poses(int count, unsigned seed);
+
 }  // namespace scancell::planner

@@ -63,18 +63,8 @@ TEST(Cell, ArmTurntableInverseKinematicsRoundTrips) {
   // brings them to the arm), elevations from -10° to 75°, any twist.
   const auto c = cell("arm-turntable");
   ASSERT_EQ(c.axes.size(), 7u);
-  std::mt19937 rng(4);
-  std::uniform_real_distribution<double> el(-0.17, 1.3), az(-M_PI, M_PI), dist(200, 400), tw(-M_PI, M_PI);
   int solved = 0;
-  for (int k = 0; k < 60; ++k) {
-    const double e = el(rng), a = az(rng);
-    const Eigen::Vector3d dir(std::cos(e) * std::cos(a), std::cos(e) * std::sin(a), std::sin(e));
-    sp::Viewpoint v;
-    v.position = Eigen::Vector3d(0, 0, 80) + dist(rng) * dir;
-    v.axis = -dir;
-    v.twist_rad = tw(rng);
-    Eigen::Isometry3d pose;
-    pose.matrix() = v.transform();
+  for (const Eigen::Isometry3d& pose : sp::view_like_poses(60, 4)) {
     const auto ik = sp::inverse_kinematics(c, pose, 40.0);
     if (!ik.ok) continue;
     ++solved;
