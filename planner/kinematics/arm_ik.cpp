@@ -20,7 +20,7 @@ Eigen::Isometry3d dh_frame(const std::array<double, 4>& row, double theta) {
   return t;
 }
 
-/// The angle of `x` in [-1, 1] or nothing when rounding cannot explain it being outside.
+/// Clamps `x` into [-1, 1]; false when rounding cannot explain `x` lying outside.
 bool clamp_unit(double& x) {
   if (std::abs(x) > 1.0 + kEdge) return false;
   x = std::clamp(x, -1.0, 1.0);
@@ -75,13 +75,14 @@ std::vector<std::array<double, 6>> ur_inverse_kinematics(const ArmDh& dh, const 
       const double px = t14.translation().x(), py = t14.translation().y();
       double c3 = (px * px + py * py - a2 * a2 - a3 * a3) / (2.0 * a2 * a3);
       if (!clamp_unit(c3)) continue;
+      // R14 = Rz(t2 + t3 + t4) Rx(alpha4), whichever the elbow.
+      const Eigen::Matrix3d r = t14.linear() * Eigen::AngleAxisd(-dh[3][1], Eigen::Vector3d::UnitX()).toRotationMatrix();
+      const double t234 = std::atan2(r(1, 0), r(0, 0));
       for (const double sign3 : {1.0, -1.0}) {
         const double t3 = sign3 * std::acos(c3);
         if (sign3 < 0.0 && t3 == 0.0) continue;  // one elbow branch, stretched out
         const double t2 = std::atan2(py, px) - std::atan2(a3 * std::sin(t3), a2 + a3 * std::cos(t3));
-        // R14 = Rz(t2 + t3 + t4) Rx(alpha4).
-        const Eigen::Matrix3d r = t14.linear() * Eigen::AngleAxisd(-dh[3][1], Eigen::Vector3d::UnitX()).toRotationMatrix();
-        const double t4 = std::atan2(r(1, 0), r(0, 0)) - t2 - t3;
+        const double t4 = t234 - t2 - t3;
         const double theta[6] = {t1, t2, t3, t4, t5, t6};
         std::array<double, 6> q;
         for (int k = 0; k < 6; ++k) q[k] = std::remainder(theta[k] - dh[k][3], 2.0 * kPi);

@@ -96,24 +96,31 @@ Eigen::Isometry3d table_to_world(const CellModel& c, double angle) {
   return t;
 }
 
+namespace {
+
+/// The arm's camera in the object frame at axes `q`, by the solver `fk` of the cell's chain (arm_chain).
+Eigen::Isometry3d arm_camera_in_object(const CellModel& c, KDL::ChainFkSolverPos_recursive& fk, const JointVector& q) {
+  KDL::JntArray j(6);
+  for (int k = 0; k < 6; ++k) j(k) = q[1 + k];
+  KDL::Frame flange;
+  fk.JntToCart(j, flange);
+  return (table_to_world(c, q[0]) * c.object_on_table).inverse() * c.arm_base * to_eigen(flange) * c.tool;
+}
+
+}  // namespace
+
 Eigen::Isometry3d forward_kinematics(const CellModel& c, const JointVector& q) {
   if (q.size() != c.axes.size()) throw std::invalid_argument("forward_kinematics: one value per axis");
-  const Eigen::Isometry3d object_to_world = table_to_world(c, q[0]) * c.object_on_table;
-  Eigen::Isometry3d camera_to_world = Eigen::Isometry3d::Identity();
-  if (c.kinematics == CellKinematics::turntable_lift_tilt) {
-    const double reach = q[1], lift = q[2], tilt = q[3], sweep = q[4];
-    camera_to_world.linear() = tilt_rotation(tilt);
-    camera_to_world.translation() = Eigen::Vector3d(reach, sweep, lift) + tilt_rotation(tilt) * c.camera_offset_mm;
-  } else {
+  if (c.kinematics != CellKinematics::turntable_lift_tilt) {
     const KDL::Chain chain = arm_chain(c);
     KDL::ChainFkSolverPos_recursive fk(chain);
-    KDL::JntArray j(6);
-    for (int k = 0; k < 6; ++k) j(k) = q[1 + k];
-    KDL::Frame flange;
-    fk.JntToCart(j, flange);
-    camera_to_world = c.arm_base * to_eigen(flange) * c.tool;
+    return arm_camera_in_object(c, fk, q);
   }
-  return object_to_world.inverse() * camera_to_world;
+  const double reach = q[1], lift = q[2], tilt = q[3], sweep = q[4];
+  Eigen::Isometry3d camera_to_world = Eigen::Isometry3d::Identity();
+  camera_to_world.linear() = tilt_rotation(tilt);
+  camera_to_world.translation() = Eigen::Vector3d(reach, sweep, lift) + tilt_rotation(tilt) * c.camera_offset_mm;
+  return (table_to_world(c, q[0]) * c.object_on_table).inverse() * camera_to_world;
 }
 
 IkResult look_at(const CellModel& cell, const Eigen::Vector3d& p, double standoff, double tilt, double table,
@@ -257,7 +264,7 @@ std::optional<JointVector> accept_arm_solution(const CellModel& c, double theta,
     if (!w) return std::nullopt;
     q[1 + k] = *w;
   }
-  if (pose_error(forward_kinematics(c, q), desired) > kTol) return std::nullopt;
+  if (pose_error(arm_camera_in_object(c, fk, q), desired) > kTol) return std::nullopt;
   return q;
 }
 
