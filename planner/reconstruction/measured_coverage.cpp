@@ -33,6 +33,14 @@ bool inside_convex(const std::vector<Eigen::Vector2d>& poly, const Eigen::Vector
   return !(pos && neg);
 }
 
+/// A compliant sample fills every footprint cell whose centre lies within ¾ of a cell of it along each tangent
+/// axis, not only the cell it rounds into: the verifier's sample cell reaches ¾ of a chord for the same reason
+/// (docs/verification.md), range noise and the projection into a row's tangent plane move samples, and
+/// rounding each to one cell left slivers of empty cells on surface the samples cover. On the tube's single
+/// shot 29 of the 66 cells left empty in the rows predicted measured had a compliant sample within ¾ cell.
+/// A gap of a whole cell or more between samples still leaves a cell empty.
+constexpr double kFillReach = 0.75;
+
 }  // namespace
 
 MeasuredCoverage::MeasuredCoverage(const RoughModel& rough, const ModelSpec& spec, CoverageOptions options)
@@ -113,7 +121,7 @@ MeasuredCoverage::MeasuredCoverage(const RoughModel& rough, const ModelSpec& spe
   for (std::size_t i = 0; i < n; ++i) filled_[i].assign(footprint_[i].size(), 0);
   filled_count_.assign(n, 0);
   for (double b : bend_) max_bend = std::max(max_bend, b);
-  reach_ = std::max(extent + 0.5 * cell_ * std::sqrt(2.0) + tolerance_ + max_bend, 1e-3);
+  reach_ = std::max(extent + kFillReach * cell_ * std::sqrt(2.0) + tolerance_ + max_bend, 1e-3);
   row_grid_.reserve(n);
   for (std::uint32_t i = 0; i < n; ++i) {
     const Eigen::Vector3d& p = points_[i];
@@ -166,16 +174,20 @@ std::size_t MeasuredCoverage::add(const RangeImage& img, const std::vector<std::
               if (d.squaredNorm() > reach_ * reach_) continue;
               if (normals_[r].dot(to_laser) <= 0.0) continue;  // the row faces away from this laser
               if (std::abs(d.dot(normals_[r])) > tolerance_ + bend_[r]) continue;
-              const std::uint32_t c = cell_key(std::lround(d.dot(u_[r]) / cell_), std::lround(d.dot(v_[r]) / cell_));
+              const double du = d.dot(u_[r]) / cell_, dv = d.dot(v_[r]) / cell_;
               const auto& f = footprint_[r];
-              const auto at = std::lower_bound(f.begin(), f.end(), c);
-              if (at == f.end() || *at != c) continue;
-              any = true;
-              auto& flag = filled_[r][static_cast<std::size_t>(at - f.begin())];
-              if (!flag) {
-                flag = 1;
-                ++filled_count_[r];
-              }
+              for (long iu = std::lround(std::ceil(du - kFillReach)); iu <= std::lround(std::floor(du + kFillReach)); ++iu)
+                for (long iv = std::lround(std::ceil(dv - kFillReach)); iv <= std::lround(std::floor(dv + kFillReach)); ++iv) {
+                  const std::uint32_t c = cell_key(iu, iv);
+                  const auto at = std::lower_bound(f.begin(), f.end(), c);
+                  if (at == f.end() || *at != c) continue;
+                  any = true;
+                  auto& flag = filled_[r][static_cast<std::size_t>(at - f.begin())];
+                  if (!flag) {
+                    flag = 1;
+                    ++filled_count_[r];
+                  }
+                }
             }
           }
       landed += any;

@@ -4,10 +4,11 @@
 // share of the surface, its footprint: the part of each adjacent triangle nearer s_i (vertex, edge midpoints,
 // centroid). The footprint is rasterised in s_i's tangent plane into cells of the spec's sample spacing
 // 1/√ρ; a spec-compliant sample (σz ≤ precision, local density ≥ ρ, eq. 3.4/3.8 from the samples themselves)
-// fills the cell it projects into when it lies within the normal tolerance of the row's plane and the row
-// faces the laser that measured it. A row is measured when at least `row_fraction` of its footprint cells are
-// filled (the tolerance grows by how far a footprint bent over an edge leaves its own tangent plane). The
-// planner's estimate counts rows the same way, so the two are directly comparable.
+// fills the cells within ¾ of a cell of where it projects (the verifier's ¾-chord reach) when it lies within
+// the normal tolerance of the row's plane and the row faces the laser that measured it. A row is measured
+// when at least `row_fraction` of its footprint cells are filled (the tolerance grows by how far a footprint
+// bent over an edge leaves its own tangent plane). The planner's estimate counts rows the same way, so the
+// two are directly comparable.
 #include <cstdint>
 #include <vector>
 

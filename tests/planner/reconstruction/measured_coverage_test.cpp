@@ -98,6 +98,56 @@ std::uint32_t row_near(const RoughModel& rm, const Eigen::Vector3d& p) {
   return best;
 }
 
+/// A noise-free image of the z = 0 plane seen from 150 mm straight above: samples every 0.25 mm in x (along
+/// the profile) and y (across profiles) over |x|, |y| ≤ 20 mm, none where |x| < gap_mm / 2.
+RangeImage plane_with_a_gap(double gap_mm) {
+  RangeImage img;
+  img.columns = img.rows = 161;
+  img.pose.camera_to_object.translation() = Eigen::Vector3d(0, 0, 150);
+  img.pose.scan_length_mm = 40.0;
+  img.samples.resize(static_cast<std::size_t>(img.columns) * static_cast<std::size_t>(img.rows));
+  for (int j = 0; j < img.rows; ++j)
+    for (int i = 0; i < img.columns; ++i) {
+      const float x = -20.0f + 0.25f * static_cast<float>(i), y = -20.0f + 0.25f * static_cast<float>(j);
+      RangeSample& s = img.samples[static_cast<std::size_t>(j) * static_cast<std::size_t>(img.columns) + static_cast<std::size_t>(i)];
+      s.measured = std::abs(x) > 0.5 * gap_mm;
+      s.object_mm = Eigen::Vector3f(x, y, 0.0f);
+      s.camera_mm = Eigen::Vector3f(x, y, -150.0f);
+      s.sigma_z_mm = 0.01f;
+    }
+  return img;
+}
+
+TEST(MeasuredCoverage, AGapUnderOneAndAHalfCellsIsBridgedAWiderOneIsNot) {
+  // Cells are 1/√2 = 0.707 mm (the spec's 2 /mm²); the row at the origin has cell centres at x = 0, ±0.707,
+  // ±1.414 mm and ±2.12 mm. A compliant sample fills the cells
+  // within ¾ cell (0.53 mm) of it along each axis. A 0.9 mm gap centred on x = 0 leaves the middle column
+  // 0.45 mm from the nearest samples: filled, the row measured (rounding each sample to its own cell alone
+  // left that column, 5 of the row's 31 cells, empty). A 1.5 mm gap leaves it 0.75 mm from them: empty, and
+  // the row open; the columns at ±0.707 mm are 0.043 mm from the samples at ±0.75 mm.
+  const TriangleMesh plane = testing::flat_patch(200.0, 4.0);
+  const RoughModel rough = make_rough_model(plane);
+  const std::uint32_t origin = row_near(rough, {0, 0, 0});
+  ASSERT_NEAR(rough.points[origin].norm(), 0.0, 1e-9);
+  MeasuredCoverage narrow(rough, thesis_spec()), wide(rough, thesis_spec());
+  narrow.add(plane_with_a_gap(0.9));
+  wide.add(plane_with_a_gap(1.5));
+  EXPECT_EQ(narrow.row_fraction(origin), 1.0);
+  EXPECT_TRUE(narrow.measured(origin));
+  EXPECT_FALSE(wide.measured(origin));
+  // What it lacks is the middle column and nothing else: its five cells, y = 0, ±0.707, ±1.414 mm.
+  const RowFootprints lacks = wide.open_footprints({origin}, 64);
+  ASSERT_EQ(lacks.size(), 1u);
+  EXPECT_EQ(lacks.first[1], 5u);
+  for (std::uint32_t k = 0; k < lacks.first[1]; ++k) EXPECT_NEAR(lacks.points[k].x(), 0.0, 1e-6) << lacks.points[k].transpose();
+  const double cells = static_cast<double>(wide.footprint_cells(origin));
+  EXPECT_DOUBLE_EQ(wide.row_fraction(origin), (cells - 5.0) / cells);
+  // A row 4 mm off the gap is whole either way.
+  const std::uint32_t aside = row_near(rough, {8, 0, 0});
+  EXPECT_EQ(narrow.row_fraction(aside), 1.0);
+  EXPECT_EQ(wide.row_fraction(aside), 1.0);
+}
+
 TEST(MeasuredCoverage, OpenFootprintsSampleWhatARowLacks) {
   // The view of the first test fills |x| < 36 mm. Cells are 1/√2 mm (the spec's 2 /mm²).
   const TriangleMesh plane = testing::flat_patch(200.0, 4.0);
