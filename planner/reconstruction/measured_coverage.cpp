@@ -38,7 +38,7 @@ bool inside_convex(const std::vector<Eigen::Vector2d>& poly, const Eigen::Vector
 /// (docs/verification.md), range noise and the projection into a row's tangent plane move samples, and
 /// rounding each to one cell left slivers of empty cells on surface the samples cover. On the tube's single
 /// shot 29 of the 66 cells left empty in the rows predicted measured had a compliant sample within ¾ cell.
-/// A gap of a whole cell or more between samples still leaves a cell empty.
+/// A gap over 1½ cells between samples can leave a cell empty, one of 2½ cells always does.
 constexpr double kFillReach = 0.75;
 
 }  // namespace
