@@ -364,6 +364,7 @@ std::vector<AimPoint> aims_open_to_sensor(const std::vector<AimPoint>& aims, con
       const Eigen::Quaterniond to_n = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), n);
       OcclusionRay ray;
       ray.origin = (aims[k].point + ray_offset_mm * n).cast<float>();
+      ray.t_near = static_cast<float>(kOffSurfaceStart * ray_offset_mm);  // unit directions: t in mm
       ray.t_far = static_cast<float>(sensor.range_min_mm);
       for (const auto& l : local) {
         ray.dir = (to_n * l).cast<float>();

@@ -91,10 +91,11 @@ std::size_t pair_rays(const Eigen::Vector3d& s, const Eigen::Vector3d& n, const 
   for (const auto& end : ends)
     for (int q = 0; q < n_offsets; ++q, ++k) {
       const Eigen::Vector3d d = end + offsets[q] - origin;
+      const double length = std::max(d.norm(), eps * 2.0);
       out[k].origin = origin.cast<float>();
       out[k].dir = d.cast<float>();
-      out[k].t_near = 0.0f;
-      out[k].t_far = static_cast<float>(1.0 - eps / std::max(d.norm(), eps * 2.0));
+      out[k].t_near = static_cast<float>(kOffSurfaceStart * eps / length);
+      out[k].t_far = static_cast<float>(1.0 - eps / length);
     }
   return k;
 }
@@ -161,9 +162,11 @@ ModelSpec detuned_spec(const ModelSpec& spec, const Countermeasures& c) {
   return s;
 }
 
-ModelSpec open_direction_spec(const ModelSpec& spec, const Countermeasures& matrix_cm) {
-  const double left = (1.0 + kOpenDirectionComplianceMargin) / (1.0 + matrix_cm.compliance_buffer);
-  return left > 1.0 ? detuned_spec(spec, Countermeasures{.compliance_buffer = left - 1.0}) : spec;
+std::optional<Countermeasures> open_direction_margin(const Countermeasures& matrix_cm) {
+  if (!(matrix_cm.compliance_buffer < kOpenDirectionComplianceMargin)) return std::nullopt;
+  Countermeasures cm = matrix_cm;
+  cm.compliance_buffer = kOpenDirectionComplianceMargin;
+  return cm;
 }
 
 MeasurabilityColumn::MeasurabilityColumn(std::vector<std::uint32_t> sorted_rows, std::uint32_t n_rows)

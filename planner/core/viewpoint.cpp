@@ -413,7 +413,7 @@ std::vector<Viewpoint> open_direction_viewpoints(const RoughModel& rough, const 
     std::vector<Eigen::Vector3d> open;
     for (const auto& l : local) {
       const Eigen::Vector3d d = to_n * l;
-      if (!scene.first_hit(p + eps * n, d, 0.0, r_far)) open.push_back(d);
+      if (!scene.first_hit(p + eps * n, d, kOffSurfaceStart * eps, r_far)) open.push_back(d);
     }
     if (open.empty()) return;
     for (const auto& d : spread_directions(open, n, st.open_directions_per_row))

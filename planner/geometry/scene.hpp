@@ -11,6 +11,14 @@
 
 namespace scancell::planner {
 
+/// Rays cast from just off a surface (the surface point moved by a ray offset along its normal) start this
+/// share of that offset further along their way. The scene is robust (watertight at edges), and so it reports
+/// a second surface through the offset origin as a hit at t = 0: on a mesh whose faces are not welded, the
+/// foot of a wall under a floor row at its edge, which a ray leaving the wall sees nothing of (a square
+/// cavity's floor rows read unmeasurable). Skipping a tenth of the offset passes such touches, as the fast
+/// test did, and nothing the offset itself would not.
+inline constexpr double kOffSurfaceStart = 0.1;
+
 /// One occlusion query: is the open segment origin -> origin + dir * t_far free of surface?
 struct OcclusionRay {
   Eigen::Vector3f origin;

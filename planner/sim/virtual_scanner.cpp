@@ -108,7 +108,9 @@ class ProfileScanner {
                                                              : cos_between(n.y(), n.z(), -(p.y() - laser.y()), z, 1.0);
       if (!(cos_xz > cos_t_xz_) || !(cos_yz > cos_t_yz_)) { ++t.grazing; continue; }
       const Eigen::Vector3d origin = R_ * p + T_ + o_.ray_offset_mm * n_obj;
-      returns_.to_receiver.push_back({origin.cast<float>(), (receiver_obj - origin).cast<float>(), 0.0f, 1.0f});
+      const double to_receiver_mm = std::max((receiver_obj - origin).norm(), 1e-9);
+      returns_.to_receiver.push_back({origin.cast<float>(), (receiver_obj - origin).cast<float>(),
+                                      static_cast<float>(kOffSurfaceStart * o_.ray_offset_mm / to_receiver_mm), 1.0f});
       returns_.column.push_back(i);
       returns_.cam_point.push_back(p);
       returns_.sigma.push_back(s_.noise_cz_per_mm * z * z / cos_yz);

@@ -252,16 +252,17 @@ TEST(Geometry, OpenDirectionViewsClaimRowsWithTheMarginOnce) {
   const ModelSpec spec = testing::thesis_spec();
   ASSERT_DOUBLE_EQ(spec.precision_mm, 0.05);
   ASSERT_DOUBLE_EQ(spec.density_per_mm2, 2.0);
-  const ModelSpec alone = open_direction_spec(spec, {});
-  EXPECT_NEAR(alone.precision_mm, 0.05 / 1.1, 1e-12);
-  EXPECT_NEAR(alone.density_per_mm2, 2.2, 1e-12);
-  // Under the free-space margin (the matrix already holds every column to σz ≤ spec/1.1) it adds nothing: the
-  // matrix applies its own buffer on top of what it is given, and the two together must still be 1.1, not 1.21.
+  // The spec the columns test those rows by: the matrix's own countermeasures, topped up by the margin.
   auto as_built = [&](double buffer) {
     Countermeasures cm;
     cm.compliance_buffer = buffer;
-    return detuned_spec(open_direction_spec(spec, cm), cm);
+    return detuned_spec(spec, open_direction_margin(cm).value_or(cm));
   };
+  EXPECT_NEAR(as_built(0.0).precision_mm, 0.05 / 1.1, 1e-12);
+  EXPECT_NEAR(as_built(0.0).density_per_mm2, 2.2, 1e-12);
+  // Under the free-space margin (the matrix already holds every column to σz ≤ spec/1.1) it adds nothing: the
+  // two together must still be 1.1, not 1.21.
+  EXPECT_FALSE(open_direction_margin(Countermeasures{.compliance_buffer = 0.1}).has_value());
   EXPECT_NEAR(as_built(0.1).precision_mm, 0.05 / 1.1, 1e-12);
   EXPECT_NEAR(as_built(0.1).density_per_mm2, 2.2, 1e-12);
   // A smaller buffer is topped up to the margin; a larger one is not loosened.
