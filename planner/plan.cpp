@@ -290,19 +290,19 @@ void append_candidates(const Stage& s, const OcclusionScene& scene, const ModelS
   ViewPlan& p = s.p;
   MatrixStats st;
   MatrixSettings ms = s.settings.matrix;
-  PlainElements plain{s.settings.matrix.countermeasures, {}};
-  if (margin_where_alone) ms.countermeasures = *margin_where_alone;
+  std::vector<std::uint8_t> others;  // rows a column of `matrix` measures
+  PlainElements plain{s.settings.matrix.countermeasures, {}, &others};
+  if (margin_where_alone) {
+    ms.countermeasures = *margin_where_alone;
+    others.assign(matrix.n_rows, 0);
+    for (const auto& c : matrix.columns) c.for_each([&](std::uint32_t r) { others[r] = 1; });
+  }
   auto more = build_measurability(p.rough, scene, s.sensor, spec, extra, ms, &st, s.cancel, margin_where_alone ? &plain : nullptr);
   if (margin_where_alone) {
-    std::vector<std::uint8_t> others(matrix.n_rows, 0);
-    for (const auto& c : matrix.columns) c.for_each([&](std::uint32_t r) { others[r] = 1; });
     for (std::size_t j = 0; j < more.columns.size(); ++j) {
-      std::vector<std::uint32_t> add;
-      plain.matrix.columns[j].for_each([&](std::uint32_t r) {
-        if (others[r]) add.push_back(r);
-      });
-      if (add.empty()) continue;
+      if (plain.matrix.columns[j].count() == 0) continue;
       std::vector<std::uint32_t> rows = more.columns[j].rows();
+      const std::vector<std::uint32_t> add = plain.matrix.columns[j].rows();  // only rows of `others`
       rows.insert(rows.end(), add.begin(), add.end());
       std::sort(rows.begin(), rows.end());
       more.columns[j] = MeasurabilityColumn(std::move(rows), more.n_rows);

@@ -127,6 +127,9 @@ double ray_offset_mm(const RoughModel& rough, const MatrixSettings& st);
 struct PlainElements {
   Countermeasures countermeasures;  // each at most the matrix's own
   MeasurabilityMatrix matrix;       // filled by build_measurability
+  /// One flag per row: only the flagged rows' plain elements are wanted (the others' rays are not cast). Null:
+  /// every row's.
+  const std::vector<std::uint8_t>* rows = nullptr;
 };
 
 /// Per column j, the only rows worth testing (ascending, appended to `rows`); the others are not measurable by

@@ -242,6 +242,24 @@ TEST(Geometry, TheMarginsNearMissRaysAndThePlainElementsComeFromOnePass) {
   // Without the plain request the same tight matrix.
   const auto alone = build_measurability(rm, scene, sensor, spec, cands, tight);
   for (std::size_t j = 0; j < cands.size(); ++j) ASSERT_EQ(alone.columns[j].rows(), one_pass.columns[j].rows());
+  // Plain elements wanted for some rows only (every third): the same elements on those rows, none elsewhere,
+  // the tight matrix unchanged, and fewer rays.
+  std::vector<std::uint8_t> every_third(rm.size(), 0);
+  for (std::size_t r = 0; r < rm.size(); r += 3) every_third[r] = 1;
+  PlainElements some{{}, {}, &every_third};
+  MatrixStats st_some;
+  const auto masked = build_measurability(rm, scene, sensor, spec, cands, tight, &st_some, nullptr, &some);
+  for (std::size_t j = 0; j < cands.size(); ++j) {
+    ASSERT_EQ(masked.columns[j].rows(), one_pass.columns[j].rows()) << "column " << j;
+    std::vector<std::uint32_t> expected;
+    for (auto r : plain.matrix.columns[j].rows())
+      if (every_third[r]) expected.push_back(r);
+    ASSERT_EQ(some.matrix.columns[j].rows(), expected) << "column " << j;
+  }
+  EXPECT_LT(st_some.rays_cast, st.rays_cast);
+  std::vector<std::uint8_t> short_flags(rm.size() - 1, 1);
+  PlainElements short_mask{{}, {}, &short_flags};
+  EXPECT_THROW(build_measurability(rm, scene, sensor, spec, cands, tight, nullptr, nullptr, &short_mask), std::invalid_argument);
   // A plain test tighter than the matrix's is a programming error, refused.
   PlainElements wrong{{0, 0, 0.2, 0}, {}};
   EXPECT_THROW(build_measurability(rm, scene, sensor, spec, cands, tight, nullptr, nullptr, &wrong), std::invalid_argument);
