@@ -281,33 +281,12 @@ std::vector<std::uint32_t> open_rows_nothing_measures(const MeasurabilityMatrix&
 }
 
 /// Candidates added after the first matrix: their columns (tested against `spec`, measured rows stripped)
-/// appended to `matrix`, the views to `candidates`, their pairs and rays to the plan's matrix statistics. With
-/// `margin_where_alone`, a column claims the rows no column of `matrix` measures only under those
-/// countermeasures, and the others by the matrix's own test, both from one pass (PlainElements).
+/// appended to `matrix`, the views to `candidates`, their pairs and rays to the plan's matrix statistics.
 void append_candidates(const Stage& s, const OcclusionScene& scene, const ModelSpec& spec, std::vector<Viewpoint> extra,
-                       MeasurabilityMatrix& matrix, std::vector<Viewpoint>& candidates,
-                       const std::optional<Countermeasures>& margin_where_alone = std::nullopt) {
+                       MeasurabilityMatrix& matrix, std::vector<Viewpoint>& candidates) {
   ViewPlan& p = s.p;
   MatrixStats st;
-  MatrixSettings ms = s.settings.matrix;
-  std::vector<std::uint8_t> others;  // rows a column of `matrix` measures
-  PlainElements plain{s.settings.matrix.countermeasures, {}, &others};
-  if (margin_where_alone) {
-    ms.countermeasures = *margin_where_alone;
-    others.assign(matrix.n_rows, 0);
-    for (const auto& c : matrix.columns) c.for_each([&](std::uint32_t r) { others[r] = 1; });
-  }
-  auto more = build_measurability(p.rough, scene, s.sensor, spec, extra, ms, &st, s.cancel, margin_where_alone ? &plain : nullptr);
-  if (margin_where_alone) {
-    for (std::size_t j = 0; j < more.columns.size(); ++j) {
-      if (plain.matrix.columns[j].count() == 0) continue;
-      std::vector<std::uint32_t> rows = more.columns[j].rows();
-      const std::vector<std::uint32_t> add = plain.matrix.columns[j].rows();  // only rows of `others`
-      rows.insert(rows.end(), add.begin(), add.end());
-      std::sort(rows.begin(), rows.end());
-      more.columns[j] = MeasurabilityColumn(std::move(rows), more.n_rows);
-    }
-  }
+  auto more = build_measurability(p.rough, scene, s.sensor, spec, extra, s.settings.matrix, &st, s.cancel);
   strip_measured(more, s.measured_rows);
   candidates.insert(candidates.end(), extra.begin(), extra.end());
   for (auto& c : more.columns) matrix.columns.push_back(std::move(c));
@@ -380,13 +359,10 @@ MeasurabilityMatrix make_matrix(const Stage& s, const OcclusionScene& scene, con
   merge_duplicates(p, extra);
   p.generation.open_direction_candidates = extra.size();
   // These views work far out, near the precision and density limits, where a rough model's averaged
-  // normals make the estimate least reliable: on the rows nothing else measures (what they were made for: a
-  // hole's floor, an undercut) their columns claim only rows measured with a margin (open_direction_margin; 10 %
-  // was the best of 0, 10 and 25 % in bench_quality). A row other views measure too they claim by the plain
-  // test, as those views do: held to the margin there as well, a far view's outer-wall rows near the density
-  // limit were left to views of their own (the tube on the turntable: 5 of its 30 views the fine surface
-  // did not need; docs/quality.md, session 46).
-  append_candidates(s, scene, s.spec, std::move(extra), matrix, candidates, open_direction_margin(s.settings.matrix.countermeasures));
+  // normals make the estimate least reliable: their columns claim only rows measured with a margin
+  // (open_direction_spec; 10 % was the best of 0, 10 and 25 % in bench_quality).
+  append_candidates(s, scene, open_direction_spec(s.spec, s.settings.matrix.countermeasures), std::move(extra), matrix,
+                    candidates);
   return matrix;
 }
 
