@@ -520,6 +520,10 @@ ViewPlan plan_views(TriangleMesh object_mm, const SensorModel& sensor, const Mod
   };
   validate(sensor);
   validate(spec);
+  // A mesh that lost all its faces (a caller's filter, an empty file read by hand) has nothing to plan for:
+  // refused by name rather than planned to no views (FCL only printed a warning for its empty BVH).
+  if (object_mm.triangles.empty() || object_mm.vertices.empty())
+    throw MeshError("plan: the object mesh has no triangles (" + std::to_string(object_mm.vertices.size()) + " vertices)");
   ViewPlan p;
   PlannerSettings settings = settings_in;
   if (settings.countermeasures_from_cell) {

@@ -98,6 +98,19 @@ TEST(Plan, ACancelRequestStopsPlanningAndNamesTheStage) {
   }
 }
 
+TEST(Plan, AMeshWithoutTrianglesIsRefusedByName) {
+  TriangleMesh points_only = mushroom_mm();
+  points_only.triangles.clear();
+  for (const TriangleMesh& m : {TriangleMesh{}, points_only}) {
+    try {
+      plan_views(m, testing::thesis_sensor(), testing::thesis_spec(), {}, {}, 1);
+      ADD_FAILURE() << "planned for a mesh without triangles";
+    } catch (const MeshError& e) {
+      EXPECT_THAT(e.what(), HasSubstr("plan: the object mesh has no triangles (" + std::to_string(m.vertices.size()) + " vertices)"));
+    }
+  }
+}
+
 // matrix.free_space_countermeasures: the shipped margin, applied to plans without a cell and only to them, and
 // (since session 41) only where footprint samples do not stand in for it: with matrix.footprint_samples 0, or
 // on a rough model that carries noise. A noise-free rough model is predicted by its footprint samples instead.
