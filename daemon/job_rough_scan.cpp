@@ -67,6 +67,11 @@ void JobRunner::rough_scan(Job& j, const std::atomic<int>& stop) {
                              " hypothetical (unseen, closed conservatively), voxel " + fmt(volume.voxel_mm(), 2) + " mm -> " + rough_file.string());
   }
   j.object = sp::load_mesh(rough_file);
+  // The fused surface stands off the true one by about jobs.fused_model_sigma_mm: the planner keeps its
+  // margins against a rough model's error on every row (rough_model_carries_error, docs/planner.md).
+  j.rough_options.surface_error_mm = settings_.fused_model_sigma_mm;
+  journal_.event(j.id, "rough model: planned as off the true surface by " + fmt(j.rough_options.surface_error_mm, 2) +
+                           " mm (jobs.fused_model_sigma_mm): the planner's margins hold on every row");
   // Which rows of the rough model are guesses (unseen space closed conservatively): the planner plans them
   // like any other, the verdict treats them apart.
   const auto flags = dir / "rough.hypothetical.xyz";

@@ -119,7 +119,7 @@ Countermeasures with_free_space_margin(Countermeasures cm, const Countermeasures
 ///   537 views, m_v of the reach >= 0.99 on 10 of 10 either way; knot1 as given, 3.2k rows 5.5 mm apart,
 ///   104 views at verified m_v 0.9935 against the margin's 140 at 0.9997).
 /// - The margin (matrix.free_space_countermeasures) on a rough model that carries noise
-///   (RoughModelOptions::normal_noise_mm, thesis 5.4), or with footprint_samples 0. Noise tilts the
+///   (RoughModelOptions::normal_noise_mm, thesis 5.4, or surface_error_mm), or with footprint_samples 0. Noise tilts the
 ///   triangles too, at random, which samples cannot model: bench_quality's σ_rm rough models lose up to 0.02
 ///   of verified m_v (knot1) by samples alone, and samples with the margin cost 12 % more views for at most
 ///   +0.005.
@@ -127,7 +127,7 @@ void choose_free_space_guard(ViewPlan& p, PlannerSettings& settings) {
   const Countermeasures& f = settings.free_space_countermeasures;
   const double spacing_mm = p.rough.size() ? std::sqrt(p.rough.total_area_mm2 / static_cast<double>(p.rough.size())) : 0.0;
   if (!p.rough_report.decimated && spacing_mm <= 2.0 * f.visibility_margin_mm) return;  // the object's own dense mesh
-  if (settings.footprint_samples > 0 && !(p.rough_options.normal_noise_mm > 0.0)) {
+  if (settings.footprint_samples > 0 && !rough_model_carries_error(p.rough_options)) {
     p.free_space_guard = FreeSpaceGuard::kFootprintSamples;
   } else if (f.any()) {
     p.free_space_guard = FreeSpaceGuard::kMargin;
@@ -281,12 +281,34 @@ std::vector<std::uint32_t> open_rows_nothing_measures(const MeasurabilityMatrix&
 }
 
 /// Candidates added after the first matrix: their columns (tested against `spec`, measured rows stripped)
-/// appended to `matrix`, the views to `candidates`, their pairs and rays to the plan's matrix statistics.
+/// appended to `matrix`, the views to `candidates`, their pairs and rays to the plan's matrix statistics. With
+/// a `margin`, the columns are tested under those countermeasures; and `margin_only_where_alone`, only on the
+/// rows no column of `matrix` measures, the others by the matrix's own test, both from one pass (PlainElements).
 void append_candidates(const Stage& s, const OcclusionScene& scene, const ModelSpec& spec, std::vector<Viewpoint> extra,
-                       MeasurabilityMatrix& matrix, std::vector<Viewpoint>& candidates) {
+                       MeasurabilityMatrix& matrix, std::vector<Viewpoint>& candidates,
+                       const std::optional<Countermeasures>& margin = std::nullopt, bool margin_only_where_alone = false) {
   ViewPlan& p = s.p;
   MatrixStats st;
-  auto more = build_measurability(p.rough, scene, s.sensor, spec, extra, s.settings.matrix, &st, s.cancel);
+  MatrixSettings ms = s.settings.matrix;
+  if (margin) ms.countermeasures = *margin;
+  const bool margin_where_alone = margin && margin_only_where_alone;
+  std::vector<std::uint8_t> others;  // rows a column of `matrix` measures
+  PlainElements plain{s.settings.matrix.countermeasures, {}, &others};
+  if (margin_where_alone) {
+    others.assign(matrix.n_rows, 0);
+    for (const auto& c : matrix.columns) c.for_each([&](std::uint32_t r) { others[r] = 1; });
+  }
+  auto more = build_measurability(p.rough, scene, s.sensor, spec, extra, ms, &st, s.cancel, margin_where_alone ? &plain : nullptr);
+  if (margin_where_alone) {
+    for (std::size_t j = 0; j < more.columns.size(); ++j) {
+      if (plain.matrix.columns[j].count() == 0) continue;
+      std::vector<std::uint32_t> rows = more.columns[j].rows();
+      const std::vector<std::uint32_t> add = plain.matrix.columns[j].rows();  // only rows of `others`
+      rows.insert(rows.end(), add.begin(), add.end());
+      std::sort(rows.begin(), rows.end());
+      more.columns[j] = MeasurabilityColumn(std::move(rows), more.n_rows);
+    }
+  }
   strip_measured(more, s.measured_rows);
   candidates.insert(candidates.end(), extra.begin(), extra.end());
   for (auto& c : more.columns) matrix.columns.push_back(std::move(c));
@@ -359,10 +381,16 @@ MeasurabilityMatrix make_matrix(const Stage& s, const OcclusionScene& scene, con
   merge_duplicates(p, extra);
   p.generation.open_direction_candidates = extra.size();
   // These views work far out, near the precision and density limits, where a rough model's averaged
-  // normals make the estimate least reliable: their columns claim only rows measured with a margin
-  // (open_direction_spec; 10 % was the best of 0, 10 and 25 % in bench_quality).
-  append_candidates(s, scene, open_direction_spec(s.spec, s.settings.matrix.countermeasures), std::move(extra), matrix,
-                    candidates);
+  // normals make the estimate least reliable: on the rows nothing else measures (what they were made for: a
+  // hole's floor, an undercut) their columns claim only rows measured with a margin (open_direction_margin; 10 %
+  // was the best of 0, 10 and 25 % in bench_quality). On a noise-free rough model, a row other views measure
+  // too they claim by the plain test, as those views do: held to the margin there as well, a far view's
+  // outer-wall rows near the density limit were left to views of their own (the tube on the turntable: 5 of
+  // its 30 views the fine surface did not need; docs/quality.md, sessions 46-47). A rough model with noise
+  // (σ_rm, thesis 5.4) or a rough scan's fused surface keeps the margin on every row: tilted normals are what
+  // the margin is for, and without it bench_quality's noisy tube verified 0.9954 -> 0.8394.
+  append_candidates(s, scene, s.spec, std::move(extra), matrix, candidates, open_direction_margin(s.settings.matrix.countermeasures),
+                    !rough_model_carries_error(p.rough_options));
   return matrix;
 }
 
@@ -736,7 +764,8 @@ void object_json(const ViewPlan& p, json& j) {
                 {"area_mm2", p.rough.total_area_mm2},
                 {"input_vertices", p.rough_report.input_vertices},
                 {"decimated", p.rough_report.decimated},
-                {"normal_noise_mm", p.rough_options.normal_noise_mm}};
+                {"normal_noise_mm", p.rough_options.normal_noise_mm},
+                {"surface_error_mm", p.rough_options.surface_error_mm}};
   if (p.rough_options.target_vertices) rough["target_vertices"] = *p.rough_options.target_vertices;
   if (p.rough_options.rho_rel) rough["rho_rel"] = *p.rough_options.rho_rel;
   j["rough_model"] = rough;

@@ -162,9 +162,11 @@ ModelSpec detuned_spec(const ModelSpec& spec, const Countermeasures& c) {
   return s;
 }
 
-ModelSpec open_direction_spec(const ModelSpec& spec, const Countermeasures& matrix_cm) {
-  const double left = (1.0 + kOpenDirectionComplianceMargin) / (1.0 + matrix_cm.compliance_buffer);
-  return left > 1.0 ? detuned_spec(spec, Countermeasures{.compliance_buffer = left - 1.0}) : spec;
+std::optional<Countermeasures> open_direction_margin(const Countermeasures& matrix_cm) {
+  if (!(matrix_cm.compliance_buffer < kOpenDirectionComplianceMargin)) return std::nullopt;
+  Countermeasures cm = matrix_cm;
+  cm.compliance_buffer = kOpenDirectionComplianceMargin;
+  return cm;
 }
 
 MeasurabilityColumn::MeasurabilityColumn(std::vector<std::uint32_t> sorted_rows, std::uint32_t n_rows)
@@ -232,8 +234,8 @@ struct Levels {
 class ColumnWorker {
  public:
   ColumnWorker(const RoughModel& rough, const OcclusionScene& scene, const std::vector<Block>& blocks, const Levels& lv, double eps,
-               bool plain)
-      : rough_(rough), scene_(scene), blocks_(blocks), lv_(lv), eps_(eps), plain_(plain),
+               bool plain, const std::vector<std::uint8_t>* plain_rows = nullptr)
+      : rough_(rough), scene_(scene), blocks_(blocks), lv_(lv), eps_(eps), plain_(plain), plain_rows_(plain_rows),
         occ_(lv.wide_rays * kPairsPerFlush), extra_occ_(8 * kPairsPerFlush) {
     pending_.reserve(kPairsPerFlush);
     rays_.reserve(lv.wide_rays * kPairsPerFlush);
@@ -296,7 +298,8 @@ class ColumnWorker {
     tally_.in_frustum += t.in_frustum;
     tally_.surviving += t.facing;
     tally_.compliant += t.compliant;
-    if (!t.compliant && (lv_.same_test || !lv_.wide.test(v.scan_length_mm, pc, nc).compliant)) return;
+    if (!t.compliant && (lv_.same_test || (plain_rows_ && !(*plain_rows_)[i]) || !lv_.wide.test(v.scan_length_mm, pc, nc).compliant))
+      return;
     pending_.push_back({i, t.compliant, t});
     rays_.resize(rays_.size() + lv_.wide_rays);
     OcclusionRay* out = &rays_[rays_.size() - lv_.wide_rays];
@@ -341,7 +344,7 @@ class ColumnWorker {
       for (std::size_t p = 0; p < extra_rows_.size(); ++p) {
         if (all_clear(&extra_occ_[8 * p], 8))
           column.push_back(extra_rows_[p]);
-        else if (plain_)
+        else if (plain_ && (!plain_rows_ || (*plain_rows_)[extra_rows_[p]]))
           plain_column.push_back(extra_rows_[p]);
       }
     }
@@ -355,6 +358,7 @@ class ColumnWorker {
   const Levels& lv_;
   const double eps_;
   const bool plain_;
+  const std::vector<std::uint8_t>* plain_rows_;  // PlainElements::rows
   std::vector<Pending> pending_;
   std::vector<OcclusionRay> rays_, extra_rays_;
   std::vector<std::uint8_t> occ_, extra_occ_;
@@ -409,13 +413,16 @@ MeasurabilityMatrix build_measurability(const RoughModel& rough, const Occlusion
     if (wide_cm.frustum_detune > t.frustum_detune || wide_cm.dof_margin_mm > t.dof_margin_mm ||
         wide_cm.compliance_buffer > t.compliance_buffer || wide_cm.visibility_margin_mm > t.visibility_margin_mm)
       throw std::invalid_argument("build_measurability: the plain test's countermeasures exceed the matrix's");
+    if (plain->rows && plain->rows->size() != rough.size())
+      throw std::invalid_argument("build_measurability: " + std::to_string(plain->rows->size()) + " plain-row flags for " +
+                                  std::to_string(rough.size()) + " rows");
     plain->matrix = MeasurabilityMatrix{};
     plain->matrix.n_rows = m.n_rows;
     plain->matrix.columns.resize(candidates.size());
   }
   Counters cnt;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, candidates.size(), 4), [&](const auto& range) {
-    ColumnWorker worker(rough, scene, blocks, lv, eps, plain != nullptr);
+    ColumnWorker worker(rough, scene, blocks, lv, eps, plain != nullptr, plain ? plain->rows : nullptr);
     std::vector<std::uint32_t> column, plain_column, rows_to_test;
     for (std::size_t j = range.begin(); j != range.end(); ++j) {
       if (cancel && cancel->load(std::memory_order_relaxed) != 0) return;  // the caller stops planning

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "planner/core/rough_model.hpp"
@@ -104,11 +105,13 @@ ModelSpec detuned_spec(const ModelSpec& spec, const Countermeasures& c);
 /// the precision and density limits, where the rough model's averaged normals mislead most (docs/planner.md).
 inline constexpr double kOpenDirectionComplianceMargin = 0.1;
 
-/// The spec those columns are built with, under a matrix whose own countermeasures are `matrix_cm`: tightened by
-/// the margin only as far as the matrix's compliance buffer does not already tighten it. The free-space margin
-/// holds every column to σz ≤ spec/1.1; stacked on it, these views were held to spec/1.21 and left rows to
-/// other views (couplingdown in free space 212 -> 198 views, m_v of the reach 0.9943 -> 0.9949; docs/quality.md).
-ModelSpec open_direction_spec(const ModelSpec& spec, const Countermeasures& matrix_cm);
+/// The countermeasures those columns claim rows with (every row on a rough model with noise; on a noise-free
+/// one the rows nothing else measures: plan.cpp, make_matrix), under a matrix whose own are `matrix_cm`: its
+/// compliance buffer topped up to the margin, or nothing when it already holds that much. The
+/// free-space margin holds every column to σz ≤ spec/1.1; stacked on it, these views were held to spec/1.21 and
+/// left rows to other views (couplingdown in free space 212 -> 198 views, m_v of the reach 0.9943 -> 0.9949;
+/// docs/quality.md).
+std::optional<Countermeasures> open_direction_margin(const Countermeasures& matrix_cm);
 
 struct MatrixSettings {
   /// Occlusion rays start this far off the surface along the normal, and stop this short of the sensor.
@@ -125,6 +128,9 @@ double ray_offset_mm(const RoughModel& rough, const MatrixSettings& st);
 struct PlainElements {
   Countermeasures countermeasures;  // each at most the matrix's own
   MeasurabilityMatrix matrix;       // filled by build_measurability
+  /// One flag per row: only the flagged rows' plain elements are wanted (the others' rays are not cast). Null:
+  /// every row's.
+  const std::vector<std::uint8_t>* rows = nullptr;
 };
 
 /// Per column j, the only rows worth testing (ascending, appended to `rows`); the others are not measurable by

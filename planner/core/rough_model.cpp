@@ -408,6 +408,8 @@ RoughModel build_rough_model(TriangleMesh mesh, const RoughModelOptions& options
   }
   if (options.normal_noise_mm < 0.0 || !std::isfinite(options.normal_noise_mm))
     throw ConfigError("rough model: normal noise must be finite and >= 0 mm");
+  if (options.surface_error_mm < 0.0 || !std::isfinite(options.surface_error_mm))
+    throw ConfigError("rough model: surface error must be finite and >= 0 mm, got " + std::to_string(options.surface_error_mm));
   if (options.normal_noise_mm > 0.0) {
     // Thesis 5.4: rough-model sampling error as Gaussian displacement along the local normal.
     const auto n = area_weighted_normals(mesh);

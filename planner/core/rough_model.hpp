@@ -31,6 +31,10 @@ struct RoughModelOptions {
   std::optional<std::size_t> target_vertices;  // --rough-vertices
   std::optional<double> rho_rel;                // --rho-rel: log2(rough density / input density), thesis 5.3
   double normal_noise_mm = 0.0;                 // σ_rm: Gaussian displacement along the normal, thesis 5.4
+  /// The error the mesh itself already carries along its normal (σ, mm), not added: a rough scan's fused
+  /// surface (the daemon's jobs.fused_model_sigma_mm). The plan treats it as it treats σ_rm
+  /// (rough_model_carries_error).
+  double surface_error_mm = 0.0;
   std::uint64_t seed = 1;
   /// Optional segmentation: one label per input vertex (>= 0, or -1 for none). Decimation keeps surviving
   /// vertices where they were, so labels follow them exactly.
@@ -38,6 +42,10 @@ struct RoughModelOptions {
   /// Optional: 1 per input vertex the rough scan only guessed (planner/fusion.hpp); carried like the labels.
   std::vector<std::uint8_t> vertex_hypothetical;
 };
+
+/// Whether the rough model is known to stand off the true surface: simulated noise (σ_rm) or a mesh that
+/// carries its own error (a rough scan). The planner then keeps its margins against that error everywhere.
+inline bool rough_model_carries_error(const RoughModelOptions& o) { return o.normal_noise_mm > 0.0 || o.surface_error_mm > 0.0; }
 
 struct RoughModelReport {
   std::size_t input_vertices = 0;

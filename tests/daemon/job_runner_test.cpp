@@ -833,6 +833,10 @@ TEST_F(SimCell, FromABoundingBoxRoughScanThenPlanAndMeasure) {
   ASSERT_TRUE(end == JobState::done || end == JobState::stalled) << journal->job(job).cause;
   const auto ev = journal->events(job);
   EXPECT_TRUE(std::any_of(ev.begin(), ev.end(), [](const std::string& e) { return e.rfind("rough_scanning", 0) == 0; }));
+  // Planned as a model that carries error (docs/planner.md: open-direction views keep their margin on every row).
+  EXPECT_TRUE(std::any_of(ev.begin(), ev.end(), [](const std::string& e) {
+    return e.find("rough model: planned as off the true surface by 0.40 mm (jobs.fused_model_sigma_mm)") != std::string::npos;
+  }));
   // The rough model: within 1.5 voxels of the cube's faces where measured, closed underneath.
   const sp::TriangleMesh rough = sp::load_mesh(dir / "data" / "jobs" / std::to_string(job) / "rough.off");
   double worst = 0.0;

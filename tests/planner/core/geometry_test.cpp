@@ -242,6 +242,24 @@ TEST(Geometry, TheMarginsNearMissRaysAndThePlainElementsComeFromOnePass) {
   // Without the plain request the same tight matrix.
   const auto alone = build_measurability(rm, scene, sensor, spec, cands, tight);
   for (std::size_t j = 0; j < cands.size(); ++j) ASSERT_EQ(alone.columns[j].rows(), one_pass.columns[j].rows());
+  // Plain elements wanted for some rows only (every third): the same elements on those rows, none elsewhere,
+  // the tight matrix unchanged, and fewer rays.
+  std::vector<std::uint8_t> every_third(rm.size(), 0);
+  for (std::size_t r = 0; r < rm.size(); r += 3) every_third[r] = 1;
+  PlainElements some{{}, {}, &every_third};
+  MatrixStats st_some;
+  const auto masked = build_measurability(rm, scene, sensor, spec, cands, tight, &st_some, nullptr, &some);
+  for (std::size_t j = 0; j < cands.size(); ++j) {
+    ASSERT_EQ(masked.columns[j].rows(), one_pass.columns[j].rows()) << "column " << j;
+    std::vector<std::uint32_t> expected;
+    for (auto r : plain.matrix.columns[j].rows())
+      if (every_third[r]) expected.push_back(r);
+    ASSERT_EQ(some.matrix.columns[j].rows(), expected) << "column " << j;
+  }
+  EXPECT_LT(st_some.rays_cast, st.rays_cast);
+  std::vector<std::uint8_t> short_flags(rm.size() - 1, 1);
+  PlainElements short_mask{{}, {}, &short_flags};
+  EXPECT_THROW(build_measurability(rm, scene, sensor, spec, cands, tight, nullptr, nullptr, &short_mask), std::invalid_argument);
   // A plain test tighter than the matrix's is a programming error, refused.
   PlainElements wrong{{0, 0, 0.2, 0}, {}};
   EXPECT_THROW(build_measurability(rm, scene, sensor, spec, cands, tight, nullptr, nullptr, &wrong), std::invalid_argument);
@@ -252,16 +270,17 @@ TEST(Geometry, OpenDirectionViewsClaimRowsWithTheMarginOnce) {
   const ModelSpec spec = testing::thesis_spec();
   ASSERT_DOUBLE_EQ(spec.precision_mm, 0.05);
   ASSERT_DOUBLE_EQ(spec.density_per_mm2, 2.0);
-  const ModelSpec alone = open_direction_spec(spec, {});
-  EXPECT_NEAR(alone.precision_mm, 0.05 / 1.1, 1e-12);
-  EXPECT_NEAR(alone.density_per_mm2, 2.2, 1e-12);
-  // Under the free-space margin (the matrix already holds every column to σz ≤ spec/1.1) it adds nothing: the
-  // matrix applies its own buffer on top of what it is given, and the two together must still be 1.1, not 1.21.
+  // The spec the columns test those rows by: the matrix's own countermeasures, topped up by the margin.
   auto as_built = [&](double buffer) {
     Countermeasures cm;
     cm.compliance_buffer = buffer;
-    return detuned_spec(open_direction_spec(spec, cm), cm);
+    return detuned_spec(spec, open_direction_margin(cm).value_or(cm));
   };
+  EXPECT_NEAR(as_built(0.0).precision_mm, 0.05 / 1.1, 1e-12);
+  EXPECT_NEAR(as_built(0.0).density_per_mm2, 2.2, 1e-12);
+  // Under the free-space margin (the matrix already holds every column to σz ≤ spec/1.1) it adds nothing: the
+  // two together must still be 1.1, not 1.21.
+  EXPECT_FALSE(open_direction_margin(Countermeasures{.compliance_buffer = 0.1}).has_value());
   EXPECT_NEAR(as_built(0.1).precision_mm, 0.05 / 1.1, 1e-12);
   EXPECT_NEAR(as_built(0.1).density_per_mm2, 2.2, 1e-12);
   // A smaller buffer is topped up to the margin; a larger one is not loosened.

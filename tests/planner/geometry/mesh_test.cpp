@@ -356,5 +356,23 @@ TEST(RoughModel, NormalNoiseIsSeededAndHasTheRequestedSigma) {
   EXPECT_NE(build_rough_model(m, o).points[0], a.points[0]);
 }
 
+TEST(RoughModel, ADeclaredSurfaceErrorMovesNothingAndANegativeOneIsRefused) {
+  const TriangleMesh m = testing::flat_patch(20.0, 1.0);
+  RoughModelOptions o;
+  o.surface_error_mm = 0.4;  // a rough scan's fused surface: declared, not added
+  const RoughModel declared = build_rough_model(m, o), plain = build_rough_model(m, {});
+  ASSERT_EQ(declared.size(), plain.size());
+  for (std::size_t i = 0; i < plain.size(); ++i) ASSERT_EQ(declared.points[i], plain.points[i]);
+  EXPECT_TRUE(rough_model_carries_error(o));
+  EXPECT_FALSE(rough_model_carries_error({}));
+  o.surface_error_mm = -0.1;
+  try {
+    build_rough_model(m, o);
+    ADD_FAILURE() << "a negative surface error was accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("surface error must be finite and >= 0 mm, got -0.1"), std::string::npos) << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace scancell::planner
