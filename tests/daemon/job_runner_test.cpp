@@ -770,9 +770,12 @@ TEST_F(SimCell, RegistrationPutsSamplesWhereTheyReallyAreUnderPoseError) {
   EXPECT_LT(v_without, m_without - 0.2);
   EXPECT_LT(rw["sample_normal_error_rms_mm"].get<double>(), 0.05);
   EXPECT_GT(ro["sample_normal_error_rms_mm"].get<double>(), 0.3);
-  // One round allowed: the stop at jobs.max_rounds names the rows that need attention, as every stall does
-  // (none retired after a single round).
-  EXPECT_THAT(journal->job(job).cause, HasSubstr("after 1 rounds: 0 rows (0.0 mm2) need attention: measured "));
+  // One round allowed: the job ends after it, either with every row the cell can measure measured (since
+  // session 47's open-direction credit, round 0 of this coarse mushroom does so) or at jobs.max_rounds,
+  // naming the rows that need attention as every stall does (none retired after a single round). Nothing
+  // else: not a stall of a round that measured nothing, nor one that fell short of its prediction.
+  EXPECT_THAT(journal->job(job).cause, ::testing::AnyOf(HasSubstr("spec met: measured "),
+                                                        HasSubstr("after 1 rounds: 0 rows (0.0 mm2) need attention: measured ")));
 }
 
 TEST_F(SimCell, PlacementAutoStandsTheObjectSoTheCellMeasuresMore) {
