@@ -68,6 +68,7 @@ struct Options {
   std::size_t rough_vertices = 5000;
   int threads = 0, oracle_decimation = 4;
   double refine_mm = 2.0;
+  bool plan_only = false;  // time the plans alone: no oracle, no judging on the fine mesh
 };
 
 /// The options, or nothing after printing the usage.
@@ -83,13 +84,14 @@ std::optional<Options> parse_options(int argc, char** argv) {
     else if (a == "--rough-vertices") o.rough_vertices = std::stoull(value());
     else if (a == "--threads") o.threads = std::stoi(value());
     else if (a == "--refine-mm") o.refine_mm = std::stod(value());
+    else if (a == "--plan-only") o.plan_only = true;
     else if (a == "--oracle-decimation") o.oracle_decimation = std::max(1, std::stoi(value()));
     else if (a == "--only") {
       std::stringstream ss(value());
       for (std::string t; std::getline(ss, t, ',');) o.only.insert(t);
     } else {
       std::cerr << "usage: bench_cell [--meshes DIR] [--only a,b] [--cell FILE|none]... [--rough-vertices N] "
-                   "[--settings FILE] [--oracle-decimation K] [--refine-mm E] [--threads N] [--csv FILE]\n";
+                   "[--settings FILE] [--oracle-decimation K] [--refine-mm E] [--threads N] [--csv FILE] [--plan-only]\n";
       return std::nullopt;
     }
   }
@@ -103,6 +105,7 @@ struct Row {
   std::size_t fine_vertices = 0, candidates = 0, views = 0, plan99 = 0;
   double reach = 0.0, cand_reach = 0.0, mv = 0.0, ratio = 0.0, plan_s = 0.0, plan_t = 0.0, est = 0.0;
   std::size_t rows_unmeasurable = 0, self_aims = 0, self_closed = 0, self_candidates = 0;  // rows no first candidate measured; their aims, closed aims, views
+  sp::MatrixStats matrix;
   sp::StageTimes stages;  // the plan's own stage times (plan_s is their sum and what lies between)
   bench::CellOracle oracle, along_normal;  // in the cell's own space; along the normals alone
   double mv_normal = 0.0, ratio_normal = 0.0;  // the plan against `along_normal`
@@ -170,6 +173,12 @@ Row judge(const sp::TriangleMesh& fine_mesh, const std::optional<sp::CellModel>&
   const sp::ViewPlan plan = sp::plan_views(fine_mesh, sensor, spec, as_planned, ro, n_threads, cell ? &*cell : nullptr);
   row.plan_s = scancell::seconds_since(t0);
   row.stages = plan.times;
+  row.cell_name = cell ? cell->name : "free";
+  row.views = plan.views.size();
+  row.candidates = plan.candidate_views.size();
+  row.est = plan.cover.cumulative_fraction.empty() ? 0.0 : plan.cover.cumulative_fraction.back();
+  row.matrix = plan.matrix_stats;
+  if (o.plan_only) return row;
   row.rows_unmeasurable = plan.generation.rows_unmeasurable_before;
   row.self_aims = plan.cell_generation.self_aims;
   row.self_closed = plan.cell_generation.self_aims_closed;
@@ -278,6 +287,20 @@ int main(int argc, char** argv) {
         std::optional<sp::CellModel> cell;
         if (cell_file != "none") cell = sp::load_cell(cell_file);
         const Row row = judge(fine_mesh, cell, sensor, spec, settings, o, n_threads);
+        if (o.plan_only) {
+          std::printf("%-16s %-20s views %4zu of %6zu candidates  est %.4f  plan_s %.2f  stages s: rough %.2f viewpoints %.2f "
+                      "matrix %.2f (samples %.2f) cover %.2f  pairs M: tested %.1f in frustum %.1f facing %.1f compliant %.1f "
+                      "rays %.1f measurable %.1f\n",
+                      obj.name.c_str(), row.cell_name.c_str(), row.views, row.candidates, row.est, row.plan_s,
+                      row.stages.rough_model_s, row.stages.viewpoints_s, row.stages.matrix_s, row.stages.matrix_samples_s,
+                      row.stages.cover_s,
+                      1e-6 * double(row.matrix.pairs_total - row.matrix.pairs_block_culled - row.matrix.pairs_normal_culled),
+                      1e-6 * double(row.matrix.pairs_in_frustum), 1e-6 * double(row.matrix.pairs_surviving),
+                      1e-6 * double(row.matrix.pairs_compliant), 1e-6 * double(row.matrix.rays_cast),
+                      1e-6 * double(row.matrix.pairs_measurable));
+          std::fflush(stdout);
+          continue;
+        }
         print_row(obj.name, row);
         if (csv) csv_row(csv, obj.name, row);
       }

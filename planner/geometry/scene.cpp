@@ -1,5 +1,7 @@
 #include "planner/geometry/scene.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -15,7 +17,13 @@ void check_device(RTCDevice device, const char* what) {
 /// The Embree ray of one query (occlusion and intersection streams use the same layout).
 void fill_ray(RTCRay& e, const OcclusionRay& r, unsigned id) {
   e.org_x = r.origin.x(); e.org_y = r.origin.y(); e.org_z = r.origin.z();
-  e.dir_x = r.dir.x(); e.dir_y = r.dir.y(); e.dir_z = r.dir.z();
+  // A component under 1e-9 of the direction's largest is rounding (a view turned by a whole quarter turn:
+  // cos(π/2) = 6e-17 in its rotation) and is cast as +0: its sign otherwise puts rays that are parallel up to
+  // 1e-19 in different octants, and Embree 3's ray streams then missed hits that each ray finds alone (the
+  // arm's views of the bored tube: 86 rays in one plan). The direction turns by under 1e-9 rad.
+  const float tiny = 1e-9f * std::max({std::abs(r.dir.x()), std::abs(r.dir.y()), std::abs(r.dir.z())});
+  auto snapped = [tiny](float c) { return std::abs(c) < tiny ? 0.0f : c; };
+  e.dir_x = snapped(r.dir.x()); e.dir_y = snapped(r.dir.y()); e.dir_z = snapped(r.dir.z());
   e.tnear = r.t_near;
   e.tfar = r.t_far;
   e.time = 0.0f;

@@ -84,5 +84,39 @@ TEST(OcclusionScene, RaysInThePlaneOfAGridLineDoNotSlipThroughItsEdges) {
   EXPECT_EQ(unoccluded, 0u);
 }
 
+
+TEST(OcclusionScene, RaysParallelUpToRoundingAreCastAlikeWhateverTheSignOfTheirTinyComponent) {
+  // Found by the arm's plans of the bored tube: a view turned by a whole quarter turn casts rays across the bore
+  // from the wall's vertices on a world axis, directions like (-2e-19, -209.8, 0). Cast in one stream, rays whose
+  // tiny component differed in sign from their neighbours' read clear though each, cast alone, strikes the far
+  // wall: 86 such rays in one plan, so points in the bore read measurable from views that cannot see them.
+  const TriangleMesh tube = weld(cylinder_with_bore(80.0, 50.0, 50.0, 3.0));
+  const OcclusionScene scene(tube);
+  std::vector<OcclusionRay> rays;
+  const float tiny[] = {-2e-19f, 3e-21f, 0.0f, -8.8e-16f, 1e-19f, -0.0f};
+  for (const auto& v : tube.vertices) {
+    const bool on_y = std::abs(v.x()) < 1e-9 && std::abs(v.y() - 25.0) < 0.1;   // the bore wall at +y
+    const bool on_x = std::abs(v.y()) < 1e-9 && std::abs(v.x() + 25.0) < 0.1;   // the bore wall at -x
+    if (!(on_y || on_x) || v.z() < 1.0 || v.z() > 49.0) continue;
+    for (std::size_t k = 0; k < std::size(tiny); ++k) {
+      const float t = tiny[(k + rays.size()) % std::size(tiny)];
+      const Eigen::Vector3f dir = on_y ? Eigen::Vector3f(t, -210.0f, 0.0f) : Eigen::Vector3f(210.0f, t, 0.0f);
+      const Eigen::Vector3f inward = on_y ? Eigen::Vector3f(0.0f, -0.003f, 0.0f) : Eigen::Vector3f(0.003f, 0.0f, 0.0f);
+      rays.push_back({v.cast<float>() + inward, dir, 1e-5f, 0.9999f});
+    }
+  }
+  ASSERT_GE(rays.size(), 100u);
+  std::vector<std::uint8_t> batch(rays.size());
+  scene.occluded(rays.data(), rays.size(), batch.data());
+  std::size_t clear = 0;
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    std::uint8_t one = 0;
+    scene.occluded(&rays[i], 1, &one);
+    EXPECT_EQ(batch[i], one) << "ray " << i;
+    clear += batch[i] == 0;
+  }
+  EXPECT_EQ(clear, 0u) << "of " << rays.size() << " rays across the bore";
+}
+
 }  // namespace
 }  // namespace scancell::planner
