@@ -395,26 +395,30 @@ class ColumnWorker {
     PointTest test;
   };
 
-  /// clear_[p]: whether the wide level's rays of pending pair p are all clear. Each pair's first ray (to the
-  /// laser) is cast first and the others only for pairs it leaves clear: most pairs that pass the analytic test
-  /// are shadowed (two in three on the arm's knot), and a blocked pair needs no second ray to be known.
+  /// clear_[p]: whether the wide level's rays of pending pair p are all clear. They are cast in stages, each
+  /// for the pairs every earlier one left clear: the ray to the laser, the ray to the receiver, then a
+  /// margin's eight near-miss rays. Most pairs that pass the analytic test are shadowed (two in three on the
+  /// arm's knot), and a blocked pair needs no further ray to be known.
   void cast_wide_rays() {
     const std::size_t n = pending_.size(), k = lv_.wide_rays;
-    first_rays_.resize(n);
-    for (std::size_t p = 0; p < n; ++p) first_rays_[p] = rays_[k * p];
-    scene_.occluded(first_rays_.data(), n, occ_.data());
-    rest_rays_.clear();
-    clear_.assign(n, 0);
-    for (std::size_t p = 0; p < n; ++p) {
-      if (occ_[p]) continue;
-      clear_[p] = 1;
-      rest_rays_.insert(rest_rays_.end(), rays_.begin() + static_cast<std::ptrdiff_t>(k * p + 1),
-                        rays_.begin() + static_cast<std::ptrdiff_t>(k * (p + 1)));
+    clear_.assign(n, 1);
+    const std::size_t bounds[] = {0, 1, 2, k};
+    for (std::size_t s = 0; s + 1 < std::size(bounds); ++s) {
+      const std::size_t from = std::min(bounds[s], k), to = std::min(bounds[s + 1], k), w = to - from;
+      if (from >= to) continue;
+      stage_rays_.clear();
+      stage_pairs_.clear();
+      for (std::size_t p = 0; p < n; ++p) {
+        if (!clear_[p]) continue;
+        stage_pairs_.push_back(p);
+        stage_rays_.insert(stage_rays_.end(), rays_.begin() + static_cast<std::ptrdiff_t>(k * p + from),
+                           rays_.begin() + static_cast<std::ptrdiff_t>(k * p + to));
+      }
+      if (stage_pairs_.empty()) return;
+      scene_.occluded(stage_rays_.data(), stage_rays_.size(), occ_.data());
+      rays_cast += stage_rays_.size();
+      for (std::size_t q = 0; q < stage_pairs_.size(); ++q) clear_[stage_pairs_[q]] = all_clear(&occ_[w * q], w);
     }
-    scene_.occluded(rest_rays_.data(), rest_rays_.size(), occ_.data());
-    rays_cast += n + rest_rays_.size();
-    for (std::size_t p = 0, q = 0; p < n; ++p)
-      if (clear_[p]) clear_[p] = all_clear(&occ_[(k - 1) * q++], k - 1);
   }
 
   /// Casts the pending pairs' rays; pairs the wide level's rays leave clear are plain elements, and tight
@@ -459,8 +463,9 @@ class ColumnWorker {
   const bool plain_;
   const std::vector<std::uint8_t>* plain_rows_;  // PlainElements::rows
   std::vector<Pending> pending_;
-  std::vector<OcclusionRay> rays_, extra_rays_, first_rays_, rest_rays_;
+  std::vector<OcclusionRay> rays_, extra_rays_, stage_rays_;
   std::vector<std::uint8_t> occ_, extra_occ_, clear_;
+  std::vector<std::size_t> stage_pairs_;
   std::vector<std::uint32_t> extra_rows_;
   Eigen::Matrix3d r_, rt_;  // the current candidate's rotation and its transpose
   RowBatch batch_;
