@@ -95,6 +95,10 @@ std::optional<Options> parse_options(int argc, char** argv) {
       return std::nullopt;
     }
   }
+  if (o.plan_only && !o.csv_path.empty()) {
+    std::cerr << "bench_cell: --plan-only has no oracle columns to write; drop --csv (the stage times go to stdout)\n";
+    return std::nullopt;
+  }
   if (o.cells.empty()) o.cells = {"none", std::string(SCANCELL_SOURCE_DIR) + "/config/cells/turntable-lift-tilt.yaml"};
   return o;
 }
@@ -107,6 +111,7 @@ struct Row {
   std::size_t rows_unmeasurable = 0, self_aims = 0, self_closed = 0, self_candidates = 0;  // rows no first candidate measured; their aims, closed aims, views
   sp::MatrixStats matrix;
   sp::StageTimes stages;  // the plan's own stage times (plan_s is their sum and what lies between)
+  sp::LocalSearchReport local_search;  // the cover's local search: views before and after, its work and time
   bench::CellOracle oracle, along_normal;  // in the cell's own space; along the normals alone
   double mv_normal = 0.0, ratio_normal = 0.0;  // the plan against `along_normal`
   std::size_t oracle_to_plan = 0;              // the oracle's greedy views to the plan's m_v of its reach
@@ -178,6 +183,7 @@ Row judge(const sp::TriangleMesh& fine_mesh, const std::optional<sp::CellModel>&
   row.candidates = plan.candidate_views.size();
   row.est = plan.cover.cumulative_fraction.empty() ? 0.0 : plan.cover.cumulative_fraction.back();
   row.matrix = plan.matrix_stats;
+  row.local_search = plan.local_search;
   if (o.plan_only) return row;
   row.rows_unmeasurable = plan.generation.rows_unmeasurable_before;
   row.self_aims = plan.cell_generation.self_aims;
@@ -290,14 +296,15 @@ int main(int argc, char** argv) {
         if (o.plan_only) {
           std::printf("%-16s %-20s views %4zu of %6zu candidates  est %.4f  plan_s %.2f  stages s: rough %.2f viewpoints %.2f "
                       "matrix %.2f (samples %.2f) cover %.2f  pairs M: tested %.1f in frustum %.1f facing %.1f compliant %.1f "
-                      "rays %.1f measurable %.1f\n",
+                      "rays %.1f measurable %.1f  local search %zu -> %zu views in %.2f s (work %.2g, at its last smaller cover %.2g)\n",
                       obj.name.c_str(), row.cell_name.c_str(), row.views, row.candidates, row.est, row.plan_s,
                       row.stages.rough_model_s, row.stages.viewpoints_s, row.stages.matrix_s, row.stages.matrix_samples_s,
                       row.stages.cover_s,
                       1e-6 * double(row.matrix.pairs_total - row.matrix.pairs_block_culled - row.matrix.pairs_normal_culled),
                       1e-6 * double(row.matrix.pairs_in_frustum), 1e-6 * double(row.matrix.pairs_surviving),
                       1e-6 * double(row.matrix.pairs_compliant), 1e-6 * double(row.matrix.rays_cast),
-                      1e-6 * double(row.matrix.pairs_measurable));
+                      1e-6 * double(row.matrix.pairs_measurable), row.local_search.start_views, row.local_search.best_views,
+                      row.local_search.seconds, double(row.local_search.work), double(row.local_search.work_at_last_improvement));
           std::fflush(stdout);
           continue;
         }

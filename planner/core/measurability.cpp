@@ -127,66 +127,6 @@ bool all_clear(const std::uint8_t* occluded, std::size_t n) {
   return std::none_of(occluded, occluded + n, [](std::uint8_t o) { return o != 0; });
 }
 
-/// Where a batch's rows may pass a level's element test at all, by the frustum and the bi-static facing alone
-/// (test_point's first two steps), in the camera frame: z in [z_lo, z_hi], |x| ≤ z·tan_x, |y| ≤ half_y + z·tan_y, and
-/// the surface facing the laser (its camera y is the point's own on a line scan, 0 on a random-access sensor)
-/// and the receiver (`baseline_mm` further along y).
-struct FrustumBounds {
-  double z_lo, z_hi, tan_x, half_y, tan_y, laser_from_point_y, baseline_mm;
-  FrustumBounds(const TestLevel& lv, double scan_length_mm, double z_hi_mm)
-      : z_lo(lv.sensor.range_min_mm), z_hi(z_hi_mm), tan_x(lv.terms.tan_half_x),
-        half_y(lv.sensor.kind == SensorKind::line_scan ? 0.5 * (scan_length_mm * lv.length_factor) : 0.0),
-        tan_y(lv.sensor.kind == SensorKind::line_scan ? 0.0 : lv.terms.tan_half_y),
-        laser_from_point_y(lv.sensor.kind == SensorKind::line_scan ? 0.0 : 1.0), baseline_mm(lv.sensor.baseline_mm) {}
-};
-
-/// Up to kBlock rows in one candidate's camera frame, transformed and judged together in Eigen arrays (SIMD
-/// whatever the compiler's own vectoriser does). It decides only which rows go on to the full element test
-/// (test_point, which repeats these checks exactly): a row goes on when it may pass the wide level, with
-/// `kSlackMm` to spare against rounding, so the matrix is the one the full test alone would give. Each check is
-/// a margin, ≥ 0 (or > 0) where it passes; a row's least margin decides. The tight level's frustum and the facing
-/// are kept for the statistics (MatrixStats' in-frustum and surviving pairs, which they count exactly).
-struct RowBatch {
-  using Lanes = Eigen::Array<double, kBlock, 1>;
-  static constexpr double kSlackMm = 1e-6;
-  Lanes x = Lanes::Zero(), y = Lanes::Zero(), z = Lanes::Zero(), nx = Lanes::Zero(), ny = Lanes::Zero(), nz = Lanes::Zero();
-  Lanes tight_frustum = Lanes::Zero(), facing = Lanes::Zero(), may_pass = Lanes::Zero();  // margins: ≥ 0, > 0, ≥ 0 where yes
-  std::uint32_t size = 0;
-
-  /// Loads rows[0..n) (n ≤ kBlock) of the model, in the world frame.
-  void load(const RoughModel& rough, const std::uint32_t* rows, std::uint32_t n) {
-    size = n;
-    for (std::uint32_t k = 0; k < n; ++k) {
-      const Eigen::Vector3d& p = rough.points[rows[k]];
-      const Eigen::Vector3d& q = rough.normals[rows[k]];
-      x[k] = p.x(), y[k] = p.y(), z[k] = p.z(), nx[k] = q.x(), ny[k] = q.y(), nz[k] = q.z();
-    }
-  }
-
-  /// Into the camera frame of a candidate at `position` with world-to-camera rotation `rt` (each sum in the
-  /// order Eigen's rt * (p − position) takes it), then judged against `tight` and `wide`.
-  void judge(const Eigen::Matrix3d& rt, const Eigen::Vector3d& position, const FrustumBounds& tight, const FrustumBounds& wide) {
-    const Lanes dx = x - position.x(), dy = y - position.y(), dz = z - position.z();
-    x = rt(0, 0) * dx + rt(0, 1) * dy + rt(0, 2) * dz;
-    y = rt(1, 0) * dx + rt(1, 1) * dy + rt(1, 2) * dz;
-    z = rt(2, 0) * dx + rt(2, 1) * dy + rt(2, 2) * dz;
-    const Lanes mx = rt(0, 0) * nx + rt(0, 1) * ny + rt(0, 2) * nz, my = rt(1, 0) * nx + rt(1, 1) * ny + rt(1, 2) * nz,
-                mz = rt(2, 0) * nx + rt(2, 1) * ny + rt(2, 2) * nz;
-    nx = mx, ny = my, nz = mz;
-    const Lanes depth = -z, ax = x.abs(), ay = y.abs();
-    const Lanes to_laser = -nx * x - ny * (y * wide.laser_from_point_y) - nz * z, to_receiver = to_laser + ny * wide.baseline_mm;
-    auto frustum = [&](const FrustumBounds& f, double e) -> Lanes {
-      return (depth - (f.z_lo - e))
-          .min((f.z_hi + e) - depth)
-          .min((depth * f.tan_x + e) - ax)
-          .min((f.half_y + depth * f.tan_y + e) - ay);
-    };
-    tight_frustum = frustum(tight, 0.0);
-    facing = to_laser.min(to_receiver);
-    may_pass = frustum(wide, kSlackMm).min(facing + kSlackMm);
-  }
-};
-
 struct Counters {
   std::atomic<std::uint64_t> block_culled{0}, normal_culled{0}, in_frustum{0}, surviving{0}, compliant{0}, rays{0}, measurable{0};
   void export_to(MatrixStats* stats, std::uint64_t total) const {
@@ -314,19 +254,15 @@ class ColumnWorker {
     plain_column.clear();
     // The wide level's spec is the looser one; the full sweep's density is the lower (TestLevel::test).
     const double z_max = compliant_depth_max_mm(lv_.wide.sensor, lv_.wide.terms, lv_.wide.spec, v.scan_length_mm);
-    const FrustumBounds tight(lv_.tight, v.scan_length_mm, lv_.tight.sensor.range_max_mm), wide(lv_.wide, v.scan_length_mm, z_max);
     if (only) {
       for (std::size_t k = 0; k < only->size(); ++k) {
         const std::uint32_t i = (*only)[k];
         if (i >= n_rows || (k > 0 && i <= (*only)[k - 1]))
           throw std::invalid_argument("build_measurability: the rows to test are not ascending rows of the model");
       }
-      for (std::size_t k = 0; k < only->size(); k += kBlock)
-        test_rows(v, only->data() + k, static_cast<std::uint32_t>(std::min<std::size_t>(kBlock, only->size() - k)), tight, wide,
-                  column, plain_column);
+      for (const std::uint32_t i : *only) test_row(v, i, column, plain_column);
       tally_.culled = n_rows - only->size();
     } else {
-      std::uint32_t rows[kBlock];
       for (std::uint32_t b = 0; b < blocks_.size(); ++b) {
         const std::uint32_t begin = b * kBlock, end = std::min<std::uint32_t>(begin + kBlock, n_rows);
         if (r_.col(2).dot(blocks_[b].normal_axis) < blocks_[b].min_facing_dot) {  // the block faces away
@@ -338,8 +274,7 @@ class ColumnWorker {
           tally_.culled += end - begin;
           continue;
         }
-        for (std::uint32_t i = begin; i < end; ++i) rows[i - begin] = i;
-        test_rows(v, rows, end - begin, tight, wide, column, plain_column);
+        for (std::uint32_t i = begin; i < end; ++i) test_row(v, i, column, plain_column);
       }
     }
     flush(v, r_, column, plain_column);
@@ -355,26 +290,13 @@ class ColumnWorker {
   std::uint64_t rays_cast = 0;
 
  private:
-  /// rows[0..n) (n ≤ kBlock) against the current candidate (r_, rt_): judged together by the frustum and the
-  /// facing (RowBatch), then the analytic test for the rows that may pass, and their rays queued.
-  void test_rows(const Viewpoint& v, const std::uint32_t* rows, std::uint32_t n, const FrustumBounds& tight,
-                 const FrustumBounds& wide, std::vector<std::uint32_t>& column, std::vector<std::uint32_t>& plain_column) {
-    batch_.load(rough_, rows, n);
-    batch_.judge(rt_, v.position, tight, wide);
-    for (std::uint32_t k = 0; k < n; ++k) {
-      const bool in_frustum = batch_.tight_frustum[k] >= 0.0;
-      tally_.in_frustum += in_frustum;
-      tally_.surviving += in_frustum && batch_.facing[k] > 0.0;
-      if (batch_.may_pass[k] >= 0.0)
-        test_row(v, rows[k], Eigen::Vector3d(batch_.x[k], batch_.y[k], batch_.z[k]),
-                 Eigen::Vector3d(batch_.nx[k], batch_.ny[k], batch_.nz[k]), column, plain_column);
-    }
-  }
-
-  /// Row i, at pc with normal nc in the current candidate's frame: the analytic test, then its rays queued.
-  void test_row(const Viewpoint& v, std::uint32_t i, const Eigen::Vector3d& pc, const Eigen::Vector3d& nc,
-                std::vector<std::uint32_t>& column, std::vector<std::uint32_t>& plain_column) {
+  /// Row i against the current candidate (r_, rt_): the analytic test, then its rays queued.
+  void test_row(const Viewpoint& v, std::uint32_t i, std::vector<std::uint32_t>& column, std::vector<std::uint32_t>& plain_column) {
+    const Eigen::Vector3d pc = rt_ * (rough_.points[i] - v.position);
+    const Eigen::Vector3d nc = rt_ * rough_.normals[i];
     const PointTest t = lv_.tight.test(v.scan_length_mm, pc, nc);
+    tally_.in_frustum += t.in_frustum;
+    tally_.surviving += t.facing;
     tally_.compliant += t.compliant;
     if (!t.compliant && (lv_.same_test || (plain_rows_ && !(*plain_rows_)[i]) || !lv_.wide.test(v.scan_length_mm, pc, nc).compliant))
       return;
@@ -468,7 +390,6 @@ class ColumnWorker {
   std::vector<std::size_t> stage_pairs_;
   std::vector<std::uint32_t> extra_rows_;
   Eigen::Matrix3d r_, rt_;  // the current candidate's rotation and its transpose
-  RowBatch batch_;
   Tally tally_;
 };
 
