@@ -195,7 +195,7 @@ Row judge(const sp::TriangleMesh& fine_mesh, const std::optional<sp::CellModel>&
   if (plan.cell) sp::append_mesh(scene_mesh, sp::fixture_mesh(*plan.cell));
   const sp::OcclusionScene scene(scene_mesh);
   row.oracle = bench::cell_oracle(fine_mesh, fine, scene, sensor, spec, plan.cell ? &*plan.cell : nullptr, o.oracle_decimation,
-                                  &settings.viewpoints, &row.along_normal);
+                                  &bench::shipped_cell_space(), &row.along_normal);
   const auto pm = sp::build_measurability(fine, scene, sensor, spec, plan.views);
   std::vector<std::uint32_t> all(plan.views.size());
   for (std::uint32_t k = 0; k < all.size(); ++k) all[k] = k;

@@ -303,7 +303,7 @@ Judged judge(Rig& rig, const Options& o, std::int64_t job, const sp::TriangleMes
   sp::append_mesh(scene_mesh, sp::fixture_mesh(placed));
   const sp::OcclusionScene scene(scene_mesh);
   j.oracle = scancell::bench::cell_oracle(fine_mesh, fine, scene, m.sensor, m.spec, &placed, o.oracle_decimation,
-                                          &m.settings.viewpoints, &j.along_normal);
+                                          &scancell::bench::shipped_cell_space(), &j.along_normal);
   std::vector<sp::Viewpoint> all;
   for (const auto& rv : j.rounds) all.insert(all.end(), rv.begin(), rv.end());
   j.single = j.rounds.empty() ? 0.0 : scancell::bench::mv_of_reach(fine, scene, m.sensor, m.spec, j.rounds.front(), j.oracle);

@@ -25,6 +25,7 @@
 #include <numbers>
 #include <optional>
 #include <set>
+#include <string>
 #include <vector>
 
 #include "planner/config.hpp"
@@ -196,6 +197,15 @@ inline std::vector<sp::Viewpoint> cell_space_candidates(const sp::RoughModel& fi
     if (fine.normals[i].squaredNorm() > 0.5)  // a knife edge's zero normal says nothing about where to look from
       aims.push_back({fine.points[i], fine.normals[i], 1.02 * sensor.optimal_standoff_mm, static_cast<std::int32_t>(i)});
   return sp::cell_viewpoints_at(aims, sensor, spec, vs, cell, checker);
+}
+
+/// The cell's own space the oracles search (cell_oracle's `cell_space`): the shipped planner settings'
+/// viewpoints, whatever settings the plan under test was made with, so that comparing two settings keeps one
+/// yardstick.
+inline const sp::ViewpointSettings& shipped_cell_space() {
+  static const sp::ViewpointSettings vs =
+      sp::load_planner_settings(std::string(SCANCELL_SOURCE_DIR) + "/config/planner/default.yaml").viewpoints;
+  return vs;
 }
 
 /// The oracle for the fine model `fine` (judge_model of `fine_mesh`) in `scene` (the fine mesh and, on a cell, the
