@@ -252,17 +252,17 @@ class ColumnWorker {
     tally_ = {};
     column.clear();
     plain_column.clear();
-    // The wide level's spec is the looser one; the full sweep's density is the lower (TestLevel::test).
-    const double z_max = compliant_depth_max_mm(lv_.wide.sensor, lv_.wide.terms, lv_.wide.spec, v.scan_length_mm);
     if (only) {
       for (std::size_t k = 0; k < only->size(); ++k) {
         const std::uint32_t i = (*only)[k];
         if (i >= n_rows || (k > 0 && i <= (*only)[k - 1]))
           throw std::invalid_argument("build_measurability: the rows to test are not ascending rows of the model");
+        test_row(v, i, column, plain_column);
       }
-      for (const std::uint32_t i : *only) test_row(v, i, column, plain_column);
       tally_.culled = n_rows - only->size();
     } else {
+      // The wide level's spec is the looser one; the full sweep's density is the lower (TestLevel::test).
+      const double z_max = compliant_depth_max_mm(lv_.wide.sensor, lv_.wide.terms, lv_.wide.spec, v.scan_length_mm);
       for (std::uint32_t b = 0; b < blocks_.size(); ++b) {
         const std::uint32_t begin = b * kBlock, end = std::min<std::uint32_t>(begin + kBlock, n_rows);
         if (r_.col(2).dot(blocks_[b].normal_axis) < blocks_[b].min_facing_dot) {  // the block faces away
