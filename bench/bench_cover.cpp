@@ -19,6 +19,7 @@
 #include "planner/core/local_cover.hpp"
 #include "planner/plan.hpp"
 #include "planner/sim/synthetic.hpp"
+#include "bench/bench_common.hpp"
 
 namespace sp = scancell::planner;
 using Clock = std::chrono::steady_clock;
@@ -98,7 +99,7 @@ void run(const char* name, const sp::MeasurabilityMatrix& m, const std::vector<d
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int run_bench(int argc, char** argv) {
   double limit = 10.0;
   bool object = true, all_objects = false;
   std::string mesh_path = std::string(SCANCELL_SOURCE_DIR) + "/../shared/meshes/bunny00.off";
@@ -159,4 +160,8 @@ int main(int argc, char** argv) {
     run(name.c_str(), m, rm.area_mm2, 0.1, limit);
   }
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return scancell::bench::guarded("bench_cover", [&] { return run_bench(argc, argv); });
 }

@@ -15,6 +15,7 @@
 
 #include "planner/kinematics/cell.hpp"
 #include "planner/sim/synthetic.hpp"
+#include "bench/bench_common.hpp"
 
 namespace sp = scancell::planner;
 using Clock = std::chrono::steady_clock;
@@ -46,7 +47,7 @@ Run solve_all(const sp::CellModel& cell, const std::vector<Eigen::Isometry3d>& p
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int run_bench(int argc, char** argv) {
   std::string cell_file = std::string(SCANCELL_SOURCE_DIR) + "/config/cells/arm-turntable.yaml";
   int n = 2000;
   unsigned seed = 1;
@@ -90,4 +91,8 @@ int main(int argc, char** argv) {
   std::printf("numerical / closed_form time: %.1f\n", m.seconds / c.seconds);
   std::printf("solved by both %d, only closed_form %d, only numerical %d\n", both, only_closed, only_numerical);
   return only_numerical == 0 ? 0 : 1;
+}
+
+int main(int argc, char** argv) {
+  return scancell::bench::guarded("bench_ik", [&] { return run_bench(argc, argv); });
 }

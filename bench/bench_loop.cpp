@@ -95,7 +95,7 @@ struct Options {
   double refine_mm = 3.0;
   sp::CoverageOptions coverage;  // jobs.row_fraction, jobs.normal_tolerance_mm
   std::string placement;         // auto | as_given; empty: the shipped settings' placement.mode
-  std::string planner_path = std::string(SCANCELL_SOURCE_DIR) + "/config/planner/default.yaml";
+  std::string planner_path = scancell::bench::shipped_settings_path();
   double min_gain_per_view_mm2 = dm::JobSettings{}.min_gain_per_view_mm2;
   bool drive_compare = false;  // --trigger daemon (the daemon's default; views vary with load) | drive_compare (the same views on every run)
 };
@@ -333,7 +333,7 @@ Judged judge(Rig& rig, const Options& o, std::int64_t job, const sp::TriangleMes
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int run_bench(int argc, char** argv) {
   const std::optional<Options> opt = parse_options(argc, argv);
   if (!opt) return 2;
   const Options& o = *opt;
@@ -405,4 +405,8 @@ int main(int argc, char** argv) {
   }
   if (o.keep_dir.empty()) fs::remove_all(rig.work);
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return scancell::bench::guarded("bench_loop", [&] { return run_bench(argc, argv); });
 }

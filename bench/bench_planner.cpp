@@ -132,7 +132,7 @@ void run_as_given(const sp::TriangleMesh& mesh_mm, int threads) {
   const std::string src = SCANCELL_SOURCE_DIR;
   const sp::SensorModel sensor = sp::load_sensor(src + "/config/sensors/line-scan-thesis.yaml");
   const sp::ModelSpec spec = sp::load_spec(src + "/config/spec/thesis.yaml");
-  const sp::PlannerSettings shipped = sp::load_planner_settings(src + "/config/planner/default.yaml");
+  const sp::PlannerSettings shipped = sp::load_planner_settings(scancell::bench::shipped_settings_path());
   const sp::CellModel cell = sp::load_cell(src + "/config/cells/turntable-lift-tilt.yaml");
   std::printf("\n== mesh as given (%zu vertices), shipped settings, %d threads ==\n", mesh_mm.vertices.size(), threads);
   std::printf("  %-10s %-22s %9s %10s %7s %9s %9s %9s %9s %8s\n", "where", "positions", "positions", "candidates",

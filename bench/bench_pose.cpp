@@ -20,10 +20,11 @@
 #include "planner/kinematics/pose_error.hpp"
 #include "planner/sim/synthetic.hpp"
 #include "planner/sim/verify.hpp"
+#include "bench/bench_common.hpp"
 
 namespace sp = scancell::planner;
 
-int main(int argc, char** argv) {
+static int run_bench(int argc, char** argv) {
   std::string meshes = std::string(SCANCELL_SOURCE_DIR) + "/../shared/meshes";
   std::set<std::string> only = {"convex-patch", "fandisk", "mushroom", "bunny00"};
   int trials = 8, threads = 0;
@@ -100,4 +101,8 @@ int main(int argc, char** argv) {
     }
   });
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return scancell::bench::guarded("bench_pose", [&] { return run_bench(argc, argv); });
 }

@@ -126,7 +126,7 @@ Row run(const std::string& name, const sp::TriangleMesh& truth, const sp::Sensor
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int run_bench(int argc, char** argv) {
   std::string dir = std::string(SCANCELL_SOURCE_DIR) + "/../shared/meshes", csv;
   int threads = 2;
   for (int i = 1; i < argc; ++i) {
@@ -141,7 +141,7 @@ int main(int argc, char** argv) {
   tbb::global_control gc(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
   const sp::SensorModel sensor = sp::load_sensor(std::string(SCANCELL_SOURCE_DIR) + "/config/sensors/line-scan-thesis.yaml");
   const sp::ModelSpec spec = sp::load_spec(std::string(SCANCELL_SOURCE_DIR) + "/config/spec/thesis.yaml");
-  const sp::PlannerSettings settings = sp::load_planner_settings(std::string(SCANCELL_SOURCE_DIR) + "/config/planner/default.yaml");
+  const sp::PlannerSettings settings = sp::load_planner_settings(scancell::bench::shipped_settings_path());
   std::vector<fs::path> files;
   for (const auto& e : fs::directory_iterator(dir))
     if (e.path().extension() == ".off") files.push_back(e.path());
@@ -176,4 +176,8 @@ int main(int argc, char** argv) {
           << r.seen_within << ',' << r.normal_median_deg << ',' << r.normal_p95_deg << ',' << r.invented << ',' << r.boundary_edges << ',' << r.fuse_s << ',' << r.peak_mb << '\n';
   }
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return scancell::bench::guarded("bench_product", [&] { return run_bench(argc, argv); });
 }

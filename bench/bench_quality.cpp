@@ -305,7 +305,7 @@ void print_efficiency(const std::vector<Row>& rows) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int run_bench(int argc, char** argv) {
   const std::optional<Options> parsed = parse_options(argc, argv);
   if (!parsed) return 2;
   Options o = *parsed;
@@ -347,4 +347,8 @@ int main(int argc, char** argv) {
   std::printf("\n3M_to_TT: 3M greedy views to reach the best turntable program's m_v; 3M_m@TTviews: 3M's m_v after as many "
               "views as that program has (all of them if fewer). CSV: %s\n", o.csv_path.c_str());
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return scancell::bench::guarded("bench_quality", [&] { return run_bench(argc, argv); });
 }

@@ -28,6 +28,8 @@
 #include <string>
 #include <vector>
 
+#include "bench_common.hpp"
+
 #include "planner/config.hpp"
 #include "planner/core/cell_viewpoints.hpp"
 #include "planner/core/cover.hpp"
@@ -174,11 +176,13 @@ inline double cell_time_s(const sp::CellModel& cell, const std::vector<sp::Viewp
 
 
 /// What the oracle reaches and needs, and what the cell can never reach by cause (fractions of the fine
-/// model's whole area).
+/// model's whole area). The causes are counted on the views along the normals as aimed, one restriction after
+/// another; what the views stepped back along the boresight and the cell's own views (bisector, oblique) reach
+/// besides is `regained`, so reachable() = 1 − lost_range − lost_plate − lost_axes − lost_collision + regained.
 struct CellOracle {
   std::vector<std::uint8_t> reach;  // fine rows some oracle candidate measures
   double reach_area_mm2 = 0.0, total_area_mm2 = 0.0;
-  double lost_range = 0.0, lost_plate = 0.0, lost_axes = 0.0, lost_collision = 0.0;
+  double lost_range = 0.0, lost_plate = 0.0, lost_axes = 0.0, lost_collision = 0.0, regained = 0.0;
   std::size_t views_95 = 0, views_99 = 0, views_999 = 0;  // greedy views to 95/99/99.9 % of the reach
   std::size_t views_995 = 0;  // and to 99.5 %, the closed loop's completeness target (issue 15)
   std::vector<double> progression;                         // share of the reach after each greedy view
@@ -204,7 +208,7 @@ inline std::vector<sp::Viewpoint> cell_space_candidates(const sp::RoughModel& fi
 /// yardstick.
 inline const sp::ViewpointSettings& shipped_cell_space() {
   static const sp::ViewpointSettings vs =
-      sp::load_planner_settings(std::string(SCANCELL_SOURCE_DIR) + "/config/planner/default.yaml").viewpoints;
+      sp::load_planner_settings(shipped_settings_path()).viewpoints;
   return vs;
 }
 
@@ -272,9 +276,11 @@ inline CellOracle cell_oracle(const sp::TriangleMesh& fine_mesh, const sp::Rough
     const auto nm = sp::build_measurability(fine, bare, sensor, spec, base);
     for (const auto& c : nm.columns) c.for_each([&](std::uint32_t r) { reach_noplate[r] = 1; });
   }
+  std::vector<std::uint8_t> reach_as_aimed(fine.size(), 0);  // the views along the normals that the cell takes as aimed
   for (std::size_t i = 0; i < n_base; ++i) {
     all_m.columns[i].for_each([&](std::uint32_t r) { reach_plate[r] = 1; });
     if (axis_ok[i]) all_m.columns[i].for_each([&](std::uint32_t r) { reach_axes[r] = 1; });
+    if (usable[i]) all_m.columns[i].for_each([&](std::uint32_t r) { reach_as_aimed[r] = 1; });
   }
   // The oracle of the usable candidates before `limit`: its reach, what is lost by cause, its greedy cover.
   auto oracle_of = [&](std::size_t limit) {
@@ -295,7 +301,8 @@ inline CellOracle cell_oracle(const sp::TriangleMesh& fine_mesh, const sp::Rough
     o.lost_range = cell ? 1.0 - area_of(reach_noplate) / total : 1.0 - area_of(reach_plate) / total;
     o.lost_plate = cell ? (area_of(reach_noplate) - area_of(reach_plate)) / total : 0.0;
     o.lost_axes = (area_of(reach_plate) - area_of(reach_axes)) / total;
-    o.lost_collision = (area_of(reach_axes) - o.reach_area_mm2) / total;
+    o.lost_collision = (area_of(reach_axes) - area_of(reach_as_aimed)) / total;
+    o.regained = (o.reach_area_mm2 - area_of(reach_as_aimed)) / total;
     sp::CoverSettings cs;
     cs.mode = sp::CoverMode::greedy;
     cs.eliminate_redundant = false;

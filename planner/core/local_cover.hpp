@@ -14,8 +14,9 @@
 // and the repaired cover is kept only if it is still smaller than the best so far. So the result is a
 // registered cover whenever the start was, and never larger than the start.
 //
-// Deterministic for a seed: the budget is a count of swaps (and of swaps since the last smaller cover); the wall-clock limit is a safety cap, and when it
-// cuts the search the report says so (only then may the result depend on the machine).
+// Deterministic for a seed: the budget is a count of swaps and of matrix elements visited since the last
+// smaller cover; the wall-clock limit is a safety cap, and when it cuts the search the report says so (only
+// then may the result depend on the machine).
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -39,7 +40,8 @@ struct LocalSearchReport {
 
 /// A cover of the rows `start` covers (those of positive weight), with at most as many views, registered
 /// under the settings when registration applies. `iterations` swaps at most, and no more than
-/// `settings.local_search_stall_iterations` after the last smaller cover; `time_limit_s` at most.
+/// `settings.local_search_stall_work` matrix elements visited after the last smaller cover; `time_limit_s` at
+/// most.
 std::vector<std::uint32_t> local_search_cover(const MeasurabilityMatrix& m, const std::vector<double>& row_weight,
                                               const CoverSettings& settings, const std::vector<std::uint32_t>& start,
                                               std::uint64_t iterations, double time_limit_s, std::uint64_t seed,
