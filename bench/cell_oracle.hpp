@@ -250,6 +250,8 @@ inline CellOracle cell_oracle(const sp::TriangleMesh& fine_mesh, const sp::Rough
     }
     cands.insert(cands.end(), stepped.begin(), stepped.end());
     n_normal = cands.size();
+    usable.resize(n_normal, 1);  // a view stepped back was kept because the axes reach it clear of collision
+    axis_ok.resize(n_normal, 1);
     if (cell_space && sp::has_cell_native_viewpoints(*cell)) {
       // Poses the views along the normals already hold (on the arm, most: its own space starts from the
       // same eight twists) are not evaluated twice.
