@@ -278,11 +278,7 @@ Row judge(const sp::TriangleMesh& fine_mesh, const std::optional<sp::CellModel>&
       throw std::runtime_error(row.cell_name + ": the plan at " + std::to_string(at.rough_vertices) +
                                " rough vertices places the object otherwise than at " + std::to_string(o.rough_sizes.front()) +
                                "; give a placement in the cell file to compare sizes");
-    const auto pmk = sp::build_measurability(fine, scene, sensor, spec, pk.views);
-    std::vector<std::uint32_t> allk(pk.views.size());
-    for (std::uint32_t v = 0; v < allk.size(); ++v) allk[v] = v;
-    const auto prog = bench::progression(pmk, allk, fine.area_mm2, row.oracle.reach, row.oracle.reach_area_mm2);
-    at.mv = prog.empty() ? 0.0 : prog.back();
+    at.mv = bench::mv_of_reach(fine, scene, sensor, spec, pk.views, row.oracle);
     at.ratio = row.oracle.views_99 ? double(at.views) / row.oracle.views_99 : std::nan("");
     row.sizes.push_back(at);
   }
