@@ -191,6 +191,31 @@ TEST(Geometry, CulledMatrixEqualsNaiveAllPairs) {
   EXPECT_LT(fast_stats.rays_cast, naive_stats.rays_cast / 5);  // culling does its job
   EXPECT_GT(fast_stats.pairs_block_culled, 0u);
   EXPECT_GT(fast_stats.pairs_normal_culled, 0u);  // blocks facing away, skipped whole: the columns are still equal
+  // The same columns as naive's also when every row is listed for testing (the footprint samples' path, no
+  // block culling), with the sensor's range cut by a depth-of-field margin and the spec tightened (the culls'
+  // deepest compliant z moves; one level, so naive can take the detuned sensor and spec), and for a
+  // random-access sensor (its frustum bounded in y by its field of view, its normal cones wider).
+  const RowsToTest every_row = [&](std::size_t, std::vector<std::uint32_t>& rows) {
+    for (std::uint32_t i = 0; i < rm.size(); ++i) rows.push_back(i);
+  };
+  auto same_columns = [&](const MeasurabilityMatrix& a, const MeasurabilityMatrix& b, const char* what) {
+    ASSERT_EQ(a.n_cols(), b.n_cols());
+    for (std::size_t j = 0; j < a.n_cols(); ++j) ASSERT_EQ(a.columns[j].rows(), b.columns[j].rows()) << what << ", column " << j;
+    EXPECT_GT(a.nonzeros(), 0u) << what;
+  };
+  same_columns(build_measurability(rm, scene, sensor, spec, cands, {}, nullptr, nullptr, nullptr, &every_row), naive, "rows listed");
+  MatrixSettings detuned;
+  detuned.countermeasures.dof_margin_mm = 40.0;
+  detuned.countermeasures.compliance_buffer = 0.3;
+  same_columns(build_measurability(rm, scene, sensor, spec, cands, detuned),
+               build_measurability_naive(rm, scene, detuned_sensor(sensor, detuned.countermeasures),
+                                         detuned_spec(spec, detuned.countermeasures), cands, {}),
+               "depth-of-field margin");
+  SensorModel area = sensor;
+  area.kind = SensorKind::random_access;
+  area.fov_y_rad = 0.5 * sensor.fov_x_rad;
+  same_columns(build_measurability(rm, scene, area, spec, cands, {}), build_measurability_naive(rm, scene, area, spec, cands, {}),
+               "random access");
   // Single-pair evaluation agrees with the matrix.
   for (std::size_t j = 0; j < fast.n_cols(); j += 97)
     for (std::uint32_t i = 0; i < rm.size(); i += 7) EXPECT_EQ(measurable(rm, scene, sensor, spec, cands[j], i), fast.columns[j].contains(i));
