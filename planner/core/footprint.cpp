@@ -1,9 +1,12 @@
 #include "planner/core/footprint.hpp"
 
 #include <algorithm>
+#include <iterator>
 #include <stdexcept>
 #include <string>
 #include <utility>
+
+#include <tbb/parallel_for.h>
 
 #include "common/errors.hpp"
 
@@ -49,37 +52,53 @@ namespace {
 /// (of `triangles`) of one it measures. A row's samples lie on its own triangles; a sample that passes where
 /// nothing around its triangle does is a sliver at the frustum's edge, or on a triangle larger than the
 /// frustum, which this leaves out (cover_by_samples).
+///
+/// Footprint rows are few (crease rows: a twentieth of a 26k-row mesh), so each row is indexed once by the
+/// footprint rows within two rings of it, and a column visits only its own rows: what spreading two rings
+/// around every measured row and sorting them gave, at a fraction of the work.
 RowsToTest samples_near_measured_rows(const MeasurabilityMatrix& m, const RowFootprints& f, const std::vector<Triangle>& triangles) {
-  auto ring = std::make_shared<std::vector<std::vector<std::uint32_t>>>(m.n_rows);
+  std::vector<std::vector<std::uint32_t>> ring(m.n_rows);
   for (const auto& t : triangles)
     for (int a = 0; a < 3; ++a) {
       if (t[a] >= m.n_rows || t[(a + 1) % 3] >= m.n_rows)
         throw DataError("row footprints: a triangle names row " + std::to_string(std::max(t[a], t[(a + 1) % 3])) + " past the " +
                         std::to_string(m.n_rows) + " rows");
-      (*ring)[t[a]].push_back(t[(a + 1) % 3]);
-      (*ring)[t[(a + 1) % 3]].push_back(t[a]);
+      ring[t[a]].push_back(t[(a + 1) % 3]);
+      ring[t[(a + 1) % 3]].push_back(t[a]);
     }
-  auto entry = std::make_shared<std::vector<std::int32_t>>(m.n_rows, -1);
-  for (std::size_t k = 0; k < f.size(); ++k) (*entry)[f.rows[k]] = static_cast<std::int32_t>(k);
-  return [&m, &f, ring, entry](std::size_t j, std::vector<std::uint32_t>& out) {
-    thread_local std::vector<std::uint8_t> marked;  // all zero between calls
-    thread_local std::vector<std::uint32_t> near;
-    if (marked.size() < m.n_rows) marked.resize(m.n_rows, 0);
-    near.clear();
-    const auto mark = [&](std::uint32_t r) {
-      if (!marked[r]) marked[r] = 1, near.push_back(r);
-    };
-    m.columns[j].for_each(mark);
-    // Two rings: the corners of the sample's triangle and of the triangles around it. One ring missed 1.7 % of
-    // a bunny's sample elements, two 0.8 % (docs/quality.md).
+  // near_entry[first[r] .. first[r + 1]): the footprint entries k whose row is within two rings of row r. The
+  // ring graph is symmetric, so these are the rows two rings around each footprint row, inverted.
+  std::vector<std::uint32_t> count(m.n_rows + 1, 0);
+  std::vector<std::uint32_t> within;     // rows within two rings of one footprint row
+  std::vector<std::uint8_t> seen(m.n_rows, 0);
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> pairs;  // (row, entry)
+  for (std::size_t k = 0; k < f.size(); ++k) {
+    within.assign(1, f.rows[k]);
+    seen[f.rows[k]] = 1;
     for (std::size_t g = 0, begin = 0; g < 2; ++g)
-      for (std::size_t i = std::exchange(begin, near.size()), n = near.size(); i < n; ++i)
-        for (const auto q : (*ring)[near[i]]) mark(q);
-    std::sort(near.begin(), near.end());
-    for (const auto r : near) {
-      marked[r] = 0;
-      if (const std::int32_t k = (*entry)[r]; k >= 0)
-        for (std::uint32_t s = f.first[k]; s < f.first[k + 1]; ++s) out.push_back(s);
+      for (std::size_t i = std::exchange(begin, within.size()), n = within.size(); i < n; ++i)
+        for (const auto q : ring[within[i]])
+          if (!seen[q]) seen[q] = 1, within.push_back(q);
+    for (const auto r : within) seen[r] = 0, pairs.emplace_back(r, static_cast<std::uint32_t>(k));
+  }
+  for (const auto& [r, k] : pairs) ++count[r + 1];
+  for (std::uint32_t r = 0; r < m.n_rows; ++r) count[r + 1] += count[r];
+  auto first = std::make_shared<std::vector<std::uint32_t>>(count);
+  auto near_entry = std::make_shared<std::vector<std::uint32_t>>(pairs.size());
+  for (const auto& [r, k] : pairs) (*near_entry)[count[r]++] = k;
+  return [&m, &f, first, near_entry](std::size_t j, std::vector<std::uint32_t>& out) {
+    thread_local std::vector<std::uint8_t> marked;  // all zero between calls
+    thread_local std::vector<std::uint32_t> entries;
+    if (marked.size() < f.size()) marked.resize(f.size(), 0);
+    entries.clear();
+    m.columns[j].for_each([&](std::uint32_t r) {
+      for (std::uint32_t e = (*first)[r]; e < (*first)[r + 1]; ++e)
+        if (const std::uint32_t k = (*near_entry)[e]; !marked[k]) marked[k] = 1, entries.push_back(k);
+    });
+    std::sort(entries.begin(), entries.end());  // footprint rows in row order, as the samples are
+    for (const auto k : entries) {
+      marked[k] = 0;
+      for (std::uint32_t s = f.first[k]; s < f.first[k + 1]; ++s) out.push_back(s);
     }
   };
 }
@@ -130,14 +149,14 @@ SampleCover cover_by_samples(const MeasurabilityMatrix& matrix, const std::vecto
   }
   c.matrix.n_rows = matrix.n_rows + n_samples;
   c.matrix.columns.resize(matrix.n_cols());
-  for (std::size_t j = 0; j < matrix.n_cols(); ++j) {
+  tbb::parallel_for(std::size_t{0}, matrix.n_cols(), [&](std::size_t j) {  // each column its own: any thread count
     std::vector<std::uint32_t> rows;
     matrix.columns[j].for_each([&](std::uint32_t r) {
       if (!is_footprint_row[r]) rows.push_back(r);
     });
     by_sample.columns[j].for_each([&](std::uint32_t s) { rows.push_back(matrix.n_rows + s); });
     c.matrix.columns[j] = MeasurabilityColumn(std::move(rows), c.matrix.n_rows);
-  }
+  });
   return c;
 }
 
@@ -156,13 +175,16 @@ std::vector<std::uint8_t> finished_rows(const SampleCover& c, const RowFootprint
 
 std::vector<std::uint32_t> column_rows(const SampleCover& c, const RowFootprints& f, std::uint32_t column,
                                        const std::vector<std::uint8_t>& finished) {
-  std::vector<std::uint32_t> rows;
+  // Both come in ascending order: the rows themselves, then the samples, whose owners ascend with them.
+  std::vector<std::uint32_t> direct, by_samples;
   c.matrix.columns.at(column).for_each([&](std::uint32_t r) {
-    if (r < c.n_rows) rows.push_back(r);
-    else if (const std::uint32_t row = f.rows[c.owner[r - c.n_rows]]; finished[row]) rows.push_back(row);
+    if (r < c.n_rows) direct.push_back(r);
+    else if (const std::uint32_t row = f.rows[c.owner[r - c.n_rows]]; finished[row] && (by_samples.empty() || by_samples.back() != row))
+      by_samples.push_back(row);
   });
-  std::sort(rows.begin(), rows.end());
-  rows.erase(std::unique(rows.begin(), rows.end()), rows.end());
+  std::vector<std::uint32_t> rows;
+  rows.reserve(direct.size() + by_samples.size());
+  std::set_union(direct.begin(), direct.end(), by_samples.begin(), by_samples.end(), std::back_inserter(rows));
   return rows;
 }
 
@@ -171,10 +193,11 @@ std::shared_ptr<const OverlapRows> overlap_by_footprint_rows(const SampleCover& 
   if (row_weight.size() != c.n_rows) throw std::invalid_argument("overlap_by_footprint_rows: one weight per rough-model row required");
   auto o = std::make_shared<OverlapRows>();
   o->matrix.n_rows = c.n_rows;
-  o->matrix.columns.reserve(c.matrix.n_cols());
+  o->matrix.columns.resize(c.matrix.n_cols());
   const std::vector<std::uint8_t> any_sample(c.n_rows, 1);
-  for (std::uint32_t j = 0; j < c.matrix.n_cols(); ++j)
-    o->matrix.columns.emplace_back(column_rows(c, f, j, any_sample), c.n_rows);
+  tbb::parallel_for(std::uint32_t{0}, static_cast<std::uint32_t>(c.matrix.n_cols()), [&](std::uint32_t j) {
+    o->matrix.columns[j] = MeasurabilityColumn(column_rows(c, f, j, any_sample), c.n_rows);
+  });
   o->weight = row_weight;
   return o;
 }

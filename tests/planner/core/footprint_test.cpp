@@ -144,6 +144,54 @@ TEST(FootprintPrediction, WithTheTrianglesASampleIsTestedOnlyByTheViewsOfItsRows
   }
 }
 
+// The same rule over many rows and views, against the plane's own triangles walked here: a sample is tested
+// by a view exactly when the view measures a row within two triangle rings of the sample's row. Rows every
+// 8 mm along y = 0 with samples 5 and 14 mm either side; frustum edges fall at assorted distances from them.
+TEST(FootprintPrediction, ASampleIsTestedExactlyWhenAViewMeasuresARowWithinTwoRingsOfItsRow) {
+  const Fixture fx;
+  RowFootprints f;
+  for (double x = -80.0; x <= 80.0; x += 8.0) {
+    f.rows.push_back(row_at(fx.rough, {x, 0.0, 0.0}));
+    for (const double dx : {-14.0, -5.0, 0.0, 5.0, 14.0}) {
+      f.points.emplace_back(x + dx, 0.0, 0.0);
+      f.normals.emplace_back(Eigen::Vector3d::UnitZ());
+    }
+    f.first.push_back(static_cast<std::uint32_t>(f.points.size()));
+    f.needed.push_back(1);
+  }
+  std::vector<Viewpoint> views;
+  for (const double x : {-70.0, -33.0, 0.0, 21.5, 47.0, 59.5 + fx.half_x, 80.0}) views.push_back(above(x));
+  const MeasurabilityMatrix m = build_measurability(fx.rough, fx.scene, fx.sensor, fx.spec, views);
+  const std::vector<double> weight(fx.rough.size(), 1.0);
+  const SampleCover full = cover_by_samples(m, weight, f, fx.scene, fx.sensor, fx.spec, views, {}, fx.rough.mean_edge_mm);
+  const SampleCover near =
+      cover_by_samples(m, weight, f, fx.scene, fx.sensor, fx.spec, views, {}, fx.rough.mean_edge_mm, nullptr, nullptr, &fx.rough.triangles);
+  // Rows within two rings of each footprint row, by the triangles' edges.
+  std::vector<std::vector<std::uint32_t>> ring(fx.rough.size());
+  for (const auto& t : fx.rough.triangles)
+    for (int a = 0; a < 3; ++a) ring[t[a]].push_back(t[(a + 1) % 3]), ring[t[(a + 1) % 3]].push_back(t[a]);
+  std::size_t kept = 0, left_out = 0;
+  for (std::size_t k = 0; k < f.size(); ++k) {
+    std::vector<std::uint32_t> within{f.rows[k]};
+    for (int g = 0; g < 2; ++g) {
+      const std::vector<std::uint32_t> so_far = within;
+      for (const auto r : so_far) within.insert(within.end(), ring[r].begin(), ring[r].end());
+    }
+    for (std::uint32_t j = 0; j < views.size(); ++j) {
+      const bool near_measured = std::any_of(within.begin(), within.end(), [&](std::uint32_t r) { return m.columns[j].contains(r); });
+      for (std::uint32_t s = f.first[k]; s < f.first[k + 1]; ++s) {
+        const bool measured = full.matrix.columns[j].contains(full.n_rows + s);
+        ASSERT_EQ(near.matrix.columns[j].contains(near.n_rows + s), measured && near_measured) << "view " << j << ", sample " << s;
+        kept += measured && near_measured;
+        left_out += measured && !near_measured;
+      }
+    }
+  }
+  // Both outcomes occur: samples in a frustum beside rows it does not reach are left out, the rest kept.
+  EXPECT_GT(kept, 100u);
+  EXPECT_GT(left_out, 0u);
+}
+
 TEST(FootprintPrediction, InconsistentFootprintsAreRefusedByWhatIsWrong) {
   const Fixture fx;
   const std::vector<Viewpoint> views{above(0.0)};
