@@ -4,9 +4,11 @@
 #include <cmath>
 #include <numbers>
 #include <numeric>
+#include <utility>
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
+#include <nanoflann.hpp>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
@@ -34,10 +36,54 @@ Eigen::Vector3d twist_reference_x(const Eigen::Vector3d& zc) {
   return u.cross(zc).normalized();
 }
 
+/// The rough model's points in a k-d tree (nanoflann). The clearance and local-patch tests visit the points
+/// near a position, not all of them: a 26k-row mesh as given asks up to nine of each per position. A query
+/// gives its points in index order, a hair beyond its radius for rounding, and each caller applies its own
+/// test, so answers and sums are those of a walk over every point.
+class RoughPointTree {
+ public:
+  explicit RoughPointTree(const RoughModel& rough)
+      : adaptor_{&rough.points}, index_(3, adaptor_, nanoflann::KDTreeSingleIndexAdaptorParams(16)) {
+    index_.buildIndex();
+  }
+  RoughPointTree(const RoughPointTree&) = delete;  // the index holds a reference to the adaptor
+  RoughPointTree& operator=(const RoughPointTree&) = delete;
+
+  /// The points within `radius_mm` of p, ascending (into `out`, which it clears).
+  void within(const Eigen::Vector3d& p, double radius_mm, std::vector<std::uint32_t>& out) const {
+    thread_local std::vector<std::pair<std::uint32_t, double>> found;
+    thread_local std::vector<std::uint64_t> bits;  // all zero between calls
+    found.clear();
+    out.clear();
+    const double r2 = radius_mm * radius_mm * (1.0 + 1e-9) + 1e-9;
+    index_.radiusSearch(p.data(), r2, found, nanoflann::SearchParams(32, 0.0f, false));
+    if (found.empty()) return;
+    // Ascending by a bit per point rather than a sort: a patch holds thousands of a dense mesh's points.
+    bits.resize(std::max(bits.size(), adaptor_.pts->size() / 64 + 1), 0);
+    std::uint32_t lo = found.front().first, hi = lo;
+    for (const auto& [i, d2] : found) bits[i / 64] |= std::uint64_t{1} << (i % 64), lo = std::min(lo, i), hi = std::max(hi, i);
+    for (std::uint32_t w = lo / 64; w <= hi / 64; ++w)
+      for (std::uint64_t b = std::exchange(bits[w], 0); b; b &= b - 1) out.push_back(w * 64 + static_cast<std::uint32_t>(__builtin_ctzll(b)));
+  }
+
+ private:
+  struct Adaptor {
+    const std::vector<Eigen::Vector3d>* pts;
+    std::size_t kdtree_get_point_count() const { return pts->size(); }
+    double kdtree_get_pt(std::size_t i, std::size_t d) const { return (*pts)[i][static_cast<Eigen::Index>(d)]; }
+    template <class B>
+    bool kdtree_get_bbox(B&) const { return false; }
+  };
+  Adaptor adaptor_;
+  nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, Adaptor>, Adaptor, 3> index_;
+};
+
 /// Whether a camera position keeps the clearance from every rough-model point.
-bool keeps_clearance(const RoughModel& rough, const Eigen::Vector3d& pos, double clearance_mm) {
-  for (const auto& q : rough.points)
-    if ((q - pos).squaredNorm() < clearance_mm * clearance_mm) return false;
+bool keeps_clearance(const RoughModel& rough, const RoughPointTree& tree, const Eigen::Vector3d& pos, double clearance_mm) {
+  thread_local std::vector<std::uint32_t> near;
+  tree.within(pos, clearance_mm, near);
+  for (const auto i : near)
+    if ((rough.points[i] - pos).squaredNorm() < clearance_mm * clearance_mm) return false;
   return true;
 }
 
@@ -202,16 +248,22 @@ std::vector<std::uint32_t> viewpoint_positions(const RoughModel& rough, const Vi
 
 /// The local patch at row point s with normal n: rough points within the footprint cylinder around the normal
 /// that face the same side. Its rise towards the camera sets R_a; its plane sets the VARIABLE twist.
-Patch local_patch(const RoughModel& rough, const Eigen::Vector3d& s, const Eigen::Vector3d& n, double patch_radius) {
+Patch local_patch(const RoughModel& rough, const RoughPointTree& tree, const Eigen::Vector3d& s, const Eigen::Vector3d& n,
+                  double patch_radius) {
   Patch patch;
   auto inside = [&](std::size_t i, double& h) {
     const Eigen::Vector3d d = rough.points[i] - s;
     h = d.dot(n);
     return std::abs(h) <= patch_radius && (d - h * n).squaredNorm() <= patch_radius * patch_radius && rough.normals[i].dot(n) > 0.0;
   };
+  // The cylinder lies within √2 of its radius from s when n is a unit vector, within (1 + |n|) of it always.
+  const double n_norm = n.norm();
+  const double reach = patch_radius * (std::abs(n_norm - 1.0) < 1e-6 ? std::sqrt(2.0) * (1.0 + 1e-6) : 1.0 + n_norm);
+  thread_local std::vector<std::uint32_t> near;
+  tree.within(s, reach, near);
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
   double wsum = 0.0, h = 0.0;
-  for (std::size_t i = 0; i < rough.size(); ++i) {
+  for (const std::uint32_t i : near) {
     if (!inside(i, h)) continue;
     patch.rise_mm = std::max(patch.rise_mm, h);
     const double w = rough.area_mm2[i];
@@ -221,7 +273,7 @@ Patch local_patch(const RoughModel& rough, const Eigen::Vector3d& s, const Eigen
   if (wsum > 0.0) {
     centroid /= wsum;
     Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-    for (std::size_t i = 0; i < rough.size(); ++i) {
+    for (const std::uint32_t i : near) {
       if (!inside(i, h)) continue;
       const Eigen::Vector3d c = rough.points[i] - centroid;
       cov += rough.area_mm2[i] * c * c.transpose();
@@ -235,9 +287,9 @@ Patch local_patch(const RoughModel& rough, const Eigen::Vector3d& s, const Eigen
 
 /// Collision avoidance zone: the camera must stand outside the object and clear of it. 0 clear, 2 inside
 /// (the ray out leaves through a surface), 3 too close.
-std::uint8_t obstruction(const RoughModel& rough, const OcclusionScene& scene, double clearance_mm, const Eigen::Vector3d& pos,
-                         const Eigen::Vector3d& out_dir) {
-  if (!keeps_clearance(rough, pos, clearance_mm)) return 3;
+std::uint8_t obstruction(const RoughModel& rough, const RoughPointTree& tree, const OcclusionScene& scene, double clearance_mm,
+                         const Eigen::Vector3d& pos, const Eigen::Vector3d& out_dir) {
+  if (!keeps_clearance(rough, tree, pos, clearance_mm)) return 3;
   if (auto hit = scene.first_hit(pos, out_dir, 0.0, 1e7); hit && hit->triangle < rough.triangles.size()) {
     // (Triangles past the rough model's are cell fixtures: leaving through one says nothing of the object.)
     const Triangle& t = rough.triangles[hit->triangle];
@@ -255,16 +307,17 @@ struct PositionFrame {
 
 /// The candidates at row `row` (DECOUPLED: its twist levels, each with its bisector twin where clear), or the
 /// reason there are none (1 no normal, 2 inside, 3 clearance).
-std::uint8_t views_at(const RoughModel& rough, const OcclusionScene& scene, const SensorModel& sensor, const ModelSpec& spec,
-                      const ViewpointSettings& st, const PositionFrame& f, std::uint32_t row, std::vector<Viewpoint>& out) {
+std::uint8_t views_at(const RoughModel& rough, const RoughPointTree& tree, const OcclusionScene& scene, const SensorModel& sensor,
+                      const ModelSpec& spec, const ViewpointSettings& st, const PositionFrame& f, std::uint32_t row,
+                      std::vector<Viewpoint>& out) {
   const Eigen::Vector3d s = rough.points[row];
   const Eigen::Vector3d n = rough.normals[row];
   if (n.squaredNorm() < 0.5) return 1;
-  const Patch patch = local_patch(rough, s, n, f.patch_radius);
+  const Patch patch = local_patch(rough, tree, s, n, f.patch_radius);
   const double r_a = std::min(patch.rise_mm, st.standoff_adjust_max_mm);
   const double standoff = std::min((f.r_o + r_a) * st.standoff_factor, f.range_cap);
   const Eigen::Vector3d position = s + standoff * n;
-  if (const std::uint8_t o = obstruction(rough, scene, st.clearance_mm, position, n)) return o;
+  if (const std::uint8_t o = obstruction(rough, tree, scene, st.clearance_mm, position, n)) return o;
   const double scan = design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad);
   // VARIABLE twist: put the receiver (camera +y) as far as possible from the patch plane.
   const double base_twist = twist_towards(-n, patch.plane_normal);
@@ -281,7 +334,7 @@ std::uint8_t views_at(const RoughModel& rough, const OcclusionScene& scene, cons
     out.push_back(v);
     if (st.bisector_tilt) {
       const Viewpoint t = bisector_twin(v, s, standoff, tilt);
-      if (obstruction(rough, scene, st.clearance_mm, t.position, (t.position - s).normalized()) == 0) out.push_back(t);
+      if (obstruction(rough, tree, scene, st.clearance_mm, t.position, (t.position - s).normalized()) == 0) out.push_back(t);
     }
   }
   return 0;
@@ -309,9 +362,10 @@ std::vector<Viewpoint> generate_viewpoints(const RoughModel& rough, const Occlus
 
   std::vector<std::vector<Viewpoint>> per_position(target_rows.size());
   std::vector<std::uint8_t> why(target_rows.size(), 0);  // 0 kept, 1 no normal, 2 inside, 3 clearance
+  const RoughPointTree tree(rough);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, target_rows.size(), 8), [&](const auto& range) {
     for (std::size_t k = range.begin(); k != range.end(); ++k)
-      why[k] = views_at(rough, scene, sensor, spec, st, f, target_rows[k], per_position[k]);
+      why[k] = views_at(rough, tree, scene, sensor, spec, st, f, target_rows[k], per_position[k]);
   });
   std::vector<Viewpoint> out;
   for (std::size_t k = 0; k < per_position.size(); ++k) {
@@ -406,6 +460,7 @@ std::vector<Viewpoint> open_direction_viewpoints(const RoughModel& rough, const 
   const double eps = 0.01 * rough.mean_edge_mm + 1e-3;
 
   std::vector<std::vector<Viewpoint>> per_row(targets.size());
+  const RoughPointTree tree(rough);
   tbb::parallel_for(std::size_t{0}, targets.size(), [&](std::size_t k) {
     const Eigen::Vector3d p = rough.points[targets[k]], n = rough.normals[targets[k]];
     if (n.squaredNorm() < 0.5) return;
@@ -420,7 +475,7 @@ std::vector<Viewpoint> open_direction_viewpoints(const RoughModel& rough, const 
       for (int s = 0; s < levels; ++s) {
         const double standoff = levels == 1 ? r_near : r_near + (r_far - r_near) * s / (levels - 1);
         const Eigen::Vector3d position = p + standoff * d;
-        if (!keeps_clearance(rough, position, st.clearance_mm)) continue;
+        if (!keeps_clearance(rough, tree, position, st.clearance_mm)) continue;
         const double scan = design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad);
         const double tilt = 0.5 * std::atan2(sensor.baseline_mm, standoff);
         for (int level = 0; level < st.twist_levels; ++level) {
@@ -436,7 +491,7 @@ std::vector<Viewpoint> open_direction_viewpoints(const RoughModel& rough, const 
           if (st.bisector_tilt) {
             // Laser and receiver rays straddling the open direction: both fit a narrow opening.
             const Viewpoint t = bisector_twin(v, p, standoff, tilt);
-            if (keeps_clearance(rough, t.position, st.clearance_mm)) per_row[k].push_back(t);
+            if (keeps_clearance(rough, tree, t.position, st.clearance_mm)) per_row[k].push_back(t);
           }
         }
       }

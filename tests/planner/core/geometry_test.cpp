@@ -172,6 +172,46 @@ TEST(Geometry, CandidatesInsideOrTooCloseAreDropped) {
   EXPECT_GE(rep.dropped_inside, plate_vertices);
 }
 
+TEST(Geometry, TheStandOffRisesByThePatchTowardsTheCameraOutToTheFootprintCylindersCorners) {
+  // Thesis 6.3 (VARIABLE/DECOUPLED): stand-off = (R_o + R_a)·f_d, R_a the rise of the rough points within the
+  // footprint cylinder around the normal (radius and half height r = hypot(fan half width, half the design
+  // scan length) = hypot(34.09, 70.22) = 78.06 mm) that face the camera's side. A plate at z = 0 with a box
+  // 30 mm high on it: a plate position whose distance across to the box's top is under r has R_a = 30 mm,
+  // even where the top lies in the cylinder's corner, farther than r from the position itself (from 72 mm
+  // across, √(72² + 30²) > r). Farther across, R_a = 0. Every plate row is a position here.
+  TriangleMesh m = testing::flat_patch(300.0, 5.0);
+  testing::add_box(m, {-25, -25, 0}, {25, 25, 30}, 5.0);
+  const RoughModel rm = make_rough_model(m);
+  const OcclusionScene scene(rm.mesh());
+  const SensorModel sensor = testing::thesis_sensor();
+  const ModelSpec spec = testing::thesis_spec();
+  ViewpointSettings st;
+  st.position_decimation = 1;
+  st.min_position_spacing_fraction = 0.0;
+  st.free_space_min_position_spacing_fraction = 0.0;
+  st.twist_levels = 1;
+  st.bisector_tilt = false;
+  const double r = std::hypot(sensor.optimal_standoff_mm * std::tan(0.5 * sensor.fov_x_rad),
+                              0.5 * design_scan_length_mm(sensor, spec, sensor.optimal_standoff_mm * st.standoff_factor,
+                                                          st.scan_length_design_incidence_rad));
+  ASSERT_NEAR(r, 78.06, 0.01);
+  ASSERT_GT(max_range_for_precision_mm(sensor, spec), (sensor.optimal_standoff_mm + 30.0) * st.standoff_factor);  // no range cap
+  std::size_t risen = 0, corner = 0, flat = 0;
+  for (const auto& v : generate_viewpoints(rm, scene, sensor, spec, st)) {
+    const Eigen::Vector3d p = rm.points[v.target_row];
+    const double across = std::hypot(std::max(std::abs(p.x()) - 25.0, 0.0), std::max(std::abs(p.y()) - 25.0, 0.0));
+    if (p.z() != 0.0 || across == 0.0 || std::abs(across - r) < 2.0) continue;  // the plate around the box, off the boundary
+    const double rise = across < r ? 30.0 : 0.0;
+    ASSERT_NEAR(v.standoff_mm, (sensor.optimal_standoff_mm + rise) * st.standoff_factor, 1e-9) << "plate row at " << p.transpose();
+    risen += rise > 0.0;
+    corner += rise > 0.0 && across > 72.0;
+    flat += rise == 0.0;
+  }
+  EXPECT_GT(risen, 100u);
+  EXPECT_GT(corner, 10u);
+  EXPECT_GT(flat, 100u);
+}
+
 TEST(Geometry, CulledMatrixEqualsNaiveAllPairs) {
   const TriangleMesh m = testing::test_mesh_mm("mushroom.off");
   RoughModelOptions o;
