@@ -8,11 +8,11 @@
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
-#include <nanoflann.hpp>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
 #include "common/errors.hpp"
+#include "planner/geometry/point_kdtree.hpp"
 
 namespace scancell::planner {
 
@@ -67,15 +67,8 @@ class RoughPointTree {
   }
 
  private:
-  struct Adaptor {
-    const std::vector<Eigen::Vector3d>* pts;
-    std::size_t kdtree_get_point_count() const { return pts->size(); }
-    double kdtree_get_pt(std::size_t i, std::size_t d) const { return (*pts)[i][static_cast<Eigen::Index>(d)]; }
-    template <class B>
-    bool kdtree_get_bbox(B&) const { return false; }
-  };
-  Adaptor adaptor_;
-  nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, Adaptor>, Adaptor, 3> index_;
+  PointsAdaptor adaptor_;
+  PointKdTree index_;
 };
 
 /// Whether a camera position keeps the clearance from every rough-model point.

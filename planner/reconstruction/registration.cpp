@@ -8,24 +8,16 @@
 #include <stdexcept>
 
 #include <Eigen/Dense>
-#include <nanoflann.hpp>
 
 #include "planner/core/rough_model.hpp"
+#include "planner/geometry/point_kdtree.hpp"
 
 namespace scancell::planner {
 
 struct ModelCloud::Data {
-  // nanoflann's view of `points` (a member type, not the anonymous namespace: a unity build includes this file).
-  struct CloudAdaptor {
-    const std::vector<Eigen::Vector3d>* pts;
-    std::size_t kdtree_get_point_count() const { return pts->size(); }
-    double kdtree_get_pt(std::size_t i, std::size_t d) const { return (*pts)[i][static_cast<Eigen::Index>(d)]; }
-    template <class B>
-    bool kdtree_get_bbox(B&) const { return false; }
-  };
   std::vector<Eigen::Vector3d> points, normals;
-  CloudAdaptor adaptor{&points};
-  nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, CloudAdaptor>, CloudAdaptor, 3> index;
+  PointsAdaptor adaptor{&points};
+  PointKdTree index;
   Data(std::vector<Eigen::Vector3d> p, std::vector<Eigen::Vector3d> n)
       : points(std::move(p)), normals(std::move(n)), index(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16)) {
     index.buildIndex();
