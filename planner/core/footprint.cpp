@@ -66,12 +66,11 @@ RowsToTest samples_near_measured_rows(const MeasurabilityMatrix& m, const RowFoo
       ring[t[a]].push_back(t[(a + 1) % 3]);
       ring[t[(a + 1) % 3]].push_back(t[a]);
     }
-  // near_entry[first[r] .. first[r + 1]): the footprint entries k whose row is within two rings of row r. The
-  // ring graph is symmetric, so these are the rows two rings around each footprint row, inverted.
-  std::vector<std::uint32_t> count(m.n_rows + 1, 0);
-  std::vector<std::uint32_t> within;     // rows within two rings of one footprint row
+  // near[r]: the footprint entries k whose row is within two rings of row r, ascending. The ring graph is
+  // symmetric, so these are the rows two rings around each footprint row, inverted.
+  auto near = std::make_shared<std::vector<std::vector<std::uint32_t>>>(m.n_rows);
+  std::vector<std::uint32_t> within;  // rows within two rings of one footprint row
   std::vector<std::uint8_t> seen(m.n_rows, 0);
-  std::vector<std::pair<std::uint32_t, std::uint32_t>> pairs;  // (row, entry)
   for (std::size_t k = 0; k < f.size(); ++k) {
     within.assign(1, f.rows[k]);
     seen[f.rows[k]] = 1;
@@ -81,21 +80,16 @@ RowsToTest samples_near_measured_rows(const MeasurabilityMatrix& m, const RowFoo
       for (std::size_t i = std::exchange(begin, within.size()), n = within.size(); i < n; ++i)
         for (const auto q : ring[within[i]])
           if (!seen[q]) seen[q] = 1, within.push_back(q);
-    for (const auto r : within) seen[r] = 0, pairs.emplace_back(r, static_cast<std::uint32_t>(k));
+    for (const auto r : within) seen[r] = 0, (*near)[r].push_back(static_cast<std::uint32_t>(k));
   }
-  for (const auto& [r, k] : pairs) ++count[r + 1];
-  for (std::uint32_t r = 0; r < m.n_rows; ++r) count[r + 1] += count[r];
-  auto first = std::make_shared<std::vector<std::uint32_t>>(count);
-  auto near_entry = std::make_shared<std::vector<std::uint32_t>>(pairs.size());
-  for (const auto& [r, k] : pairs) (*near_entry)[count[r]++] = k;
-  return [&m, &f, first, near_entry](std::size_t j, std::vector<std::uint32_t>& out) {
+  return [&m, &f, near](std::size_t j, std::vector<std::uint32_t>& out) {
     thread_local std::vector<std::uint8_t> marked;  // all zero between calls
     thread_local std::vector<std::uint32_t> entries;
     if (marked.size() < f.size()) marked.resize(f.size(), 0);
     entries.clear();
     m.columns[j].for_each([&](std::uint32_t r) {
-      for (std::uint32_t e = (*first)[r]; e < (*first)[r + 1]; ++e)
-        if (const std::uint32_t k = (*near_entry)[e]; !marked[k]) marked[k] = 1, entries.push_back(k);
+      for (const std::uint32_t k : (*near)[r])
+        if (!marked[k]) marked[k] = 1, entries.push_back(k);
     });
     std::sort(entries.begin(), entries.end());  // footprint rows in row order, as the samples are
     for (const auto k : entries) {
