@@ -7,7 +7,7 @@
 // the job's total views against the oracle's views to 99 %, and where the loss lies: the reach no executed
 // view measures, by the state the job left the nearest rough row in, and how much of it faces the plate.
 //
-//   bench_loop [--meshes DIR] [--only a,b] [--rough-vertices N] [--refine-mm E] [--max-rounds N]
+//   bench_loop [--meshes DIR] [--objects shared|generated] [--only a,b] [--rough-vertices N] [--refine-mm E] [--max-rounds N]
 //              [--placement auto|as_given] [--row-fraction F] [--normal-tolerance-mm T] [--footprint-samples K]
 //              [--oracle-decimation K] [--threads N] [--csv FILE] [--keep DIR] [--planner FILE]
 //              [--min-gain-per-view-mm2 A] [--trigger drive_compare|daemon]
@@ -18,6 +18,7 @@
 // machine's load, a few views from run to run) or the drive's position compare (the same views on every run:
 // for comparing two settings).
 //
+// --objects generated: the held-out shapes of generated_objects.hpp in place of the shared meshes and CAD parts.
 // Shared meshes are scaled to a longest side of 200 mm and their edges refined to E mm (3): the fine model,
 // which is both what the job is given and the object on the table (a job's rough model is made from it at
 // N rows, 5000). The drives and the sweep run 10× faster than the real cell (as the tests' and the demo's
@@ -43,6 +44,7 @@
 #include "bench_common.hpp"
 #include "bench_objects.hpp"
 #include "cell_oracle.hpp"
+#include "generated_objects.hpp"
 #include "common/json_matrix.hpp"
 #include "daemon/cell_io.hpp"
 #include "daemon/job_runner.hpp"
@@ -87,6 +89,7 @@ void write_mesh(const sp::TriangleMesh& m, const fs::path& path) {
 
 struct Options {
   std::string meshes_dir = std::string(SCANCELL_SOURCE_DIR) + "/../shared/meshes";
+  std::string objects = "shared";  // shared (the shared meshes, then the CAD parts) | generated (held out)
   std::string csv_path, keep_dir;
   std::set<std::string> only;
   std::size_t rough_vertices = 5000;
@@ -107,6 +110,13 @@ std::optional<Options> parse_options(int argc, char** argv) {
     const std::string a = argv[i];
     auto value = [&] { return scancell::bench::option_value(argc, argv, i); };
     if (a == "--meshes") o.meshes_dir = value();
+    else if (a == "--objects") {
+      o.objects = value();
+      if (!scancell::bench::is_object_set(o.objects)) {
+        std::cerr << "--objects: shared or generated, not " << o.objects << "\n";
+        return std::nullopt;
+      }
+    }
     else if (a == "--csv") o.csv_path = value();
     else if (a == "--keep") o.keep_dir = value();
     else if (a == "--rough-vertices") o.rough_vertices = std::stoull(value());
@@ -132,7 +142,7 @@ std::optional<Options> parse_options(int argc, char** argv) {
       std::stringstream ss(value());
       for (std::string t; std::getline(ss, t, ',');) o.only.insert(t);
     } else {
-      std::cerr << "usage: bench_loop [--meshes DIR] [--only a,b] [--rough-vertices N] [--refine-mm E] [--max-rounds N] "
+      std::cerr << "usage: bench_loop [--meshes DIR] [--objects shared|generated] [--only a,b] [--rough-vertices N] [--refine-mm E] [--max-rounds N] "
                    "[--placement auto|as_given] [--row-fraction F] [--normal-tolerance-mm T] [--footprint-samples K] [--oracle-decimation K] "
                    "[--threads N] [--csv FILE] [--keep DIR] [--planner FILE] [--min-gain-per-view-mm2 A] [--trigger drive_compare|daemon]\n";
       return std::nullopt;
@@ -338,8 +348,7 @@ static int run_bench(int argc, char** argv) {
   if (!opt) return 2;
   const Options& o = *opt;
   Rig rig = make_rig(o);
-  std::vector<scancell::bench::BenchObject> objects = scancell::bench::shared_mesh_objects(o.meshes_dir, o.refine_mm);
-  for (auto& obj : scancell::bench::cad_objects(3.0, o.refine_mm)) objects.push_back(std::move(obj));
+  const std::vector<scancell::bench::BenchObject> objects = scancell::bench::objects_to_plan(o.objects, o.meshes_dir, o.refine_mm);
 
   std::ofstream csv;
   if (!o.csv_path.empty()) {
