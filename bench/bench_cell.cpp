@@ -377,7 +377,7 @@ static int run_bench(int argc, char** argv) {
   auto settings = sp::load_planner_settings(o.settings_file);
   settings.keep_candidates = true;
 
-  const std::vector<bench::BenchObject> objects = bench::objects_to_plan(o.objects, o.meshes_dir, o.refine_mm);
+  const std::vector<bench::BenchObject> objects = bench::only_these(bench::objects_to_plan(o.objects, o.meshes_dir, o.refine_mm), o.only);
 
   const int n_threads = o.threads > 0 ? o.threads : tbb::info::default_concurrency();
   tbb::task_arena arena(n_threads);
@@ -402,7 +402,6 @@ static int run_bench(int argc, char** argv) {
               "oracle 95/99/999", "cands", "plan", "cand_rch", "m_v_rch", "ratio", "plan_s", "cell_t_s", "orac_t_s");
   arena.execute([&] {
     for (const auto& obj : objects) {
-      if (!o.only.empty() && !o.only.count(obj.name)) continue;
       const sp::TriangleMesh fine_mesh = obj.make();
       for (const auto& cell_file : o.cells) {
         std::optional<sp::CellModel> cell;

@@ -347,8 +347,9 @@ static int run_bench(int argc, char** argv) {
   const std::optional<Options> opt = parse_options(argc, argv);
   if (!opt) return 2;
   const Options& o = *opt;
+  const std::vector<scancell::bench::BenchObject> objects =
+      scancell::bench::only_these(scancell::bench::objects_to_plan(o.objects, o.meshes_dir, o.refine_mm), o.only);
   Rig rig = make_rig(o);
-  const std::vector<scancell::bench::BenchObject> objects = scancell::bench::objects_to_plan(o.objects, o.meshes_dir, o.refine_mm);
 
   std::ofstream csv;
   if (!o.csv_path.empty()) {
@@ -367,7 +368,6 @@ static int run_bench(int argc, char** argv) {
               "job_t_s", "orac_t_s", "wall_s");
   tbb::task_arena arena(o.threads);
   for (const auto& obj : objects) {
-    if (!o.only.empty() && !o.only.count(obj.name)) continue;
     const auto t0 = std::chrono::steady_clock::now();
     const fs::path mesh_file = rig.work / (obj.name + ".off");
     write_mesh(obj.make(), mesh_file);

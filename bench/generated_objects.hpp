@@ -7,6 +7,7 @@
 // - gear: 18 trapezoid teeth round a bore (narrow clefts whose flanks face each other);
 // - goblet: a solid of revolution, a wide bowl over a thin stem (overhang, a neck the plate's views look up at);
 // - torus: lying on the plate (its underside faces the plate all round, its hole faces inwards).
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -14,6 +15,7 @@
 #include <functional>
 #include <map>
 #include <numbers>
+#include <set>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -226,6 +228,23 @@ inline std::vector<BenchObject> objects_to_plan(const std::string& set, const st
   std::vector<BenchObject> out = shared_mesh_objects(meshes_dir, refine_mm);
   for (auto& obj : cad_objects(3.0, refine_mm)) out.push_back(std::move(obj));
   return out;
+}
+
+/// `objects` narrowed to the names in `only` (all of them when it is empty), in their order; throws
+/// std::invalid_argument naming every name in `only` that is not one of them.
+inline std::vector<BenchObject> only_these(std::vector<BenchObject> objects, const std::set<std::string>& only) {
+  if (only.empty()) return objects;
+  std::string missing;
+  for (const auto& name : only)
+    if (std::none_of(objects.begin(), objects.end(), [&](const BenchObject& b) { return b.name == name; }))
+      missing += (missing.empty() ? "" : ", ") + name;
+  if (!missing.empty()) {
+    std::string known;
+    for (const auto& b : objects) known += (known.empty() ? "" : ", ") + b.name;
+    throw std::invalid_argument("--only: no object named " + missing + " in this set (" + known + ")");
+  }
+  std::erase_if(objects, [&](const BenchObject& b) { return !only.count(b.name); });
+  return objects;
 }
 
 }  // namespace scancell::bench
