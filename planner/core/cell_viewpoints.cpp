@@ -246,10 +246,13 @@ Expanded expand_aim(const AimPoint& a, const SensorModel& sensor, const ModelSpe
     bool reachable = false;
     // The bisector's yaw is half the triangulation angle at the stand-off tried.
     auto yaw_at = [&](double standoff) { return yaw_sign * 0.5 * std::atan2(sensor.baseline_mm, standoff); };
+    auto rotation_at = [&](double standoff) { return cell_frame(aim(b0, elevation_at(elev, standoff), yaw_at(standoff)), table_to_object); };
+    // The sweep keeps eq. 3.8 at the aim as this view sees it: a clamped or capped elevation sees it obliquely.
     const auto placed = first_clear_standoff(
-        cell, checker, a.point, a.standoff_mm, range_cap, st.cell_standoff_steps,
-        [&](double standoff) { return cell_frame(aim(b0, elevation_at(elev, standoff), yaw_at(standoff)), table_to_object); },
-        [&](double standoff, int) { return design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad); },
+        cell, checker, a.point, a.standoff_mm, range_cap, st.cell_standoff_steps, rotation_at,
+        [&](double standoff, int) {
+          return aimed_scan_length_mm(sensor, spec, standoff, rotation_at(standoff), a.normal, st.scan_length_design_incidence_rad);
+        },
         reachable);
     if (placed) {
       Viewpoint v = placed->view;

@@ -18,6 +18,10 @@
 // - each with the one twist the cell reaches (the other sign when the first is out of reach), and, when
 //   the scanner body would hit the object or the plate, stepped back along the boresight (the stand-off
 //   grows towards the precision-limited range) rather than dropped.
+// - each swept at the length that keeps eq. 3.8 at its aim as the view sees it (aimed_scan_length_mm): the
+//   design incidence's, shorter where a capped or clamped elevation sees the aim more obliquely (a face 63°
+//   below the horizontal seen level from the plate's height: 92 mm instead of 140 at R_o, or nothing of it
+//   measured).
 // arm_turntable: the wrist takes any twist, so every free candidate is a pose the cell may take as it is;
 // one the arm cannot reach or whose scanner body hits the object or the plate steps back along its
 // boresight the same way, and one looking up at a face turned to the plate is also tried lowered by

@@ -212,6 +212,21 @@ double design_scan_length_mm(const SensorModel& sensor, const ModelSpec& spec, d
   return std::clamp(length, sensor.scan_length_min_mm, sensor.scan_length_max_mm);
 }
 
+double aimed_scan_length_mm(const SensorModel& sensor, const ModelSpec& spec, double range_mm, const Eigen::Matrix3d& rotation,
+                            const Eigen::Vector3d& normal, double design_incidence_rad) {
+  if (sensor.kind != SensorKind::line_scan) return 0.0;
+  const Eigen::Vector3d n = rotation.transpose() * normal;  // camera frame: a facing surface has n.z > 0
+  if (!(n.z() > 0.0)) return design_scan_length_mm(sensor, spec, range_mm, design_incidence_rad);
+  const double c = std::cos(design_incidence_rad);
+  const double c_xz = std::min(c, n.z() / std::hypot(n.x(), n.z()));
+  const double c_yz = std::min(c, n.z() / std::hypot(n.y(), n.z()));
+  const double dx = range_mm * sensor.fov_x_rad / (sensor.samples_x - 1) / c_xz;
+  const double dy2 = 1.0 / spec.density_per_mm2 - dx * dx;
+  if (dy2 <= 0.0) return sensor.scan_length_min_mm;
+  const double length = std::sqrt(dy2) * c_yz * (sensor.samples_y - 1);
+  return std::clamp(length, sensor.scan_length_min_mm, sensor.scan_length_max_mm);
+}
+
 namespace {
 
 /// Viewpoint positions: RM_v, a d_v-times sparser subset of the rough-model rows (DECOUPLED), or every row

@@ -118,6 +118,16 @@ struct GenerationReport {
 double design_scan_length_mm(const SensorModel& sensor, const ModelSpec& spec, double range_mm,
                              double design_incidence_rad);
 
+/// design_scan_length_mm for a view that sees the surface it is aimed at (outward unit `normal`, object frame)
+/// more obliquely than the design incidence: the incidence in each plane (eq. 3.4's θ_xz, θ_yz of the normal at
+/// the boresight, camera `rotation`) is the larger of the design's and the surface's, so that eq. 3.8 still
+/// holds there. A view whose elevation the cell caps (a face turned to the plate, seen level from the plate's
+/// height; a top steeper than the tilt range) sees its aim at 60° and more: at the design sweep its samples
+/// there fall under the density spec and the view measures nothing of what it was made for. A surface not
+/// facing the view: the design length.
+double aimed_scan_length_mm(const SensorModel& sensor, const ModelSpec& spec, double range_mm, const Eigen::Matrix3d& rotation,
+                            const Eigen::Vector3d& normal, double design_incidence_rad);
+
 /// `count` rows spread by farthest-point sampling in (position, normal_weight_mm · normal) space, starting from
 /// row 0. Deterministic for any thread count.
 std::vector<std::uint32_t> farthest_point_sample(const RoughModel& rough, std::size_t count, double normal_weight_mm);

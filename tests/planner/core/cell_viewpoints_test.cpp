@@ -42,6 +42,39 @@ struct BoxOnPlate {
   }
 };
 
+/// A slope rising from the plate along `up_slope` (x = 30 at z = 0) on the cell in `file`, facing the plate.
+struct SlopeOnPlate {
+  sp::RoughModel rough;
+  sp::CellModel cell;
+  sp::SensorModel sensor = sp::testing::thesis_sensor();
+  sp::ModelSpec spec = sp::testing::thesis_spec();
+  sp::ViewpointSettings settings;
+  sp::OcclusionScene scene;
+  sp::CollisionChecker checker;
+  SlopeOnPlate(const Eigen::Vector3d& up_slope, const char* file)
+      : rough(slope_rows(up_slope)),
+        cell(sp::load_cell(sp::testing::source_path(file))),
+        scene(sp::with_fixtures(rough.mesh(), cell)),
+        checker(cell, rough.mesh()) {}
+  static sp::RoughModel slope_rows(const Eigen::Vector3d& up_slope) {
+    sp::TriangleMesh slope;
+    sp::testing::add_grid(slope, {30.0, -30.0, 0.0}, Eigen::Vector3d::UnitY(), up_slope, 13, 10, 5.0);
+    return sp::make_rough_model(slope);
+  }
+  /// The rows 1-10 mm over the plate (its top is the table's z = 0, the object frame's too), away from the sides.
+  std::vector<std::uint32_t> low_rows() const {
+    std::vector<std::uint32_t> out;
+    for (std::uint32_t r = 0; r < rough.size(); ++r)
+      if (rough.points[r].z() > 1.0 && rough.points[r].z() <= 10.0 && std::abs(rough.points[r].y()) <= 20.0) out.push_back(r);
+    return out;
+  }
+  /// The cell's views aimed at row `r` along its normal at f_d·R_o.
+  std::vector<sp::Viewpoint> views_of(std::uint32_t r) const {
+    return sp::cell_viewpoints_at({{rough.points[r], rough.normals[r], 1.02 * sensor.optimal_standoff_mm, static_cast<std::int32_t>(r)}},
+                                  sensor, spec, settings, cell, checker);
+  }
+};
+
 }  // namespace
 
 TEST(CellViewpoints, EveryCandidateIsReachableClearAndHasTheCellsTwist) {
@@ -258,28 +291,18 @@ TEST(OpenAims, AFaceOnThePlateAndASlotFloorAreClosedTheRestOpen) {
 // elevation asin(h / d) for a point h above the plate at stand-off d), and then measures the point at
 // 26.6° − asin(h / d) incidence. On both cells, every row of the slope's lowest 10 mm gets such a view.
 TEST(CellViewpoints, AFaceTurnedToThePlateIsSeenFromThePlatesHeightNotThroughIt) {
-  sp::TriangleMesh slope;
   const Eigen::Vector3d up_slope = Eigen::Vector3d(20.0, 0.0, 40.0).normalized();  // from x = 30 at z = 0 to x = 50 at z = 40
-  sp::testing::add_grid(slope, {30.0, -30.0, 0.0}, Eigen::Vector3d::UnitY(), up_slope, 13, 10, 5.0);
-  const sp::RoughModel rough = sp::make_rough_model(slope);
   const Eigen::Vector3d normal = Eigen::Vector3d::UnitY().cross(up_slope);  // (0.894, 0, −0.447)
   ASSERT_NEAR(std::asin(normal.z()), -std::atan(0.5), 1e-12);
   for (const char* file : {"config/cells/turntable-lift-tilt.yaml", "config/cells/arm-turntable.yaml"}) {
     SCOPED_TRACE(file);
-    const sp::CellModel cell = sp::load_cell(sp::testing::source_path(file));
-    const sp::SensorModel sensor = sp::testing::thesis_sensor();
-    const sp::ModelSpec spec = sp::testing::thesis_spec();
-    const sp::ViewpointSettings settings;
-    const sp::OcclusionScene scene(sp::with_fixtures(rough.mesh(), cell));
-    const sp::CollisionChecker checker(cell, rough.mesh());
-    std::size_t low_rows = 0;
-    for (std::uint32_t r = 0; r < rough.size(); ++r) {
-      const double h = rough.points[r].z();  // the plate's top is the table's z = 0, the object frame's too
-      if (h <= 1.0 || h > 10.0 || std::abs(rough.points[r].y()) > 20.0) continue;
-      ++low_rows;
-      ASSERT_NEAR(rough.normals[r].dot(normal), 1.0, 1e-9);
-      const auto views = sp::cell_viewpoints_at({{rough.points[r], rough.normals[r], 1.02 * sensor.optimal_standoff_mm, static_cast<std::int32_t>(r)}},
-                                                sensor, spec, settings, cell, checker);
+    const SlopeOnPlate t(up_slope, file);
+    const auto low = t.low_rows();
+    EXPECT_GE(low.size(), 9u);
+    for (const auto r : low) {
+      const double h = t.rough.points[r].z();
+      ASSERT_NEAR(t.rough.normals[r].dot(normal), 1.0, 1e-9);
+      const auto views = t.views_of(r);
       ASSERT_FALSE(views.empty()) << "row at h " << h;
       // The first view: the thesis' view capped at the plate's height, elevation asin(h / d).
       const sp::Viewpoint& v = views.front();
@@ -288,10 +311,38 @@ TEST(CellViewpoints, AFaceTurnedToThePlateIsSeenFromThePlatesHeightNotThroughIt)
       std::size_t measuring = 0;
       for (const auto& w : views) {
         EXPECT_GE(w.position.z(), -1e-9);  // no camera below the plate's top
-        measuring += sp::measurable(rough, scene, sensor, spec, w, r);
+        measuring += sp::measurable(t.rough, t.scene, t.sensor, t.spec, w, r);
       }
       EXPECT_GE(measuring, 1u) << "row at h " << h;
     }
-    EXPECT_GE(low_rows, 9u);
+  }
+}
+
+TEST(CellViewpoints, AFaceSteeplyTurnedToThePlateIsSweptShortEnoughToMeetTheDensity) {
+  // The torus's underside band (generated_objects.hpp): a face whose normal points 63° below the horizontal,
+  // 1-10 mm over the plate. Its views are capped level at the plate's height, so each sees it 62-64° off in
+  // the x-z plane; at the design sweep (30°) the density there is 0.8-1.6 samples/mm² and no view measured it.
+  const double down = 63.0 * std::numbers::pi / 180.0;
+  const SlopeOnPlate t(Eigen::Vector3d(std::sin(down), 0.0, std::cos(down)), "config/cells/turntable-lift-tilt.yaml");
+  const auto low = t.low_rows();
+  EXPECT_GE(low.size(), 9u);
+  for (const auto r : low) {
+    const double h = t.rough.points[r].z();
+    ASSERT_NEAR(std::asin(t.rough.normals[r].z()), -down, 1e-9);
+    const auto views = t.views_of(r);
+    ASSERT_FALSE(views.empty()) << "row at h " << h;
+    std::size_t measuring = 0;
+    for (const auto& v : views) {
+      const double design = sp::design_scan_length_mm(t.sensor, t.spec, v.standoff_mm, t.settings.scan_length_design_incidence_rad);
+      EXPECT_NEAR(v.scan_length_mm, sp::aimed_scan_length_mm(t.sensor, t.spec, v.standoff_mm, v.rotation(), t.rough.normals[r],
+                                                             t.settings.scan_length_design_incidence_rad), 1e-9);
+      EXPECT_LT(v.scan_length_mm, 0.8 * design) << "row at h " << h;
+      if (!sp::measurable(t.rough, t.scene, t.sensor, t.spec, v, r)) continue;
+      ++measuring;
+      sp::Viewpoint at_design = v;  // the same pose swept at the design length misses the density spec there
+      at_design.scan_length_mm = design;
+      EXPECT_FALSE(sp::measurable(t.rough, t.scene, t.sensor, t.spec, at_design, r)) << "row at h " << h;
+    }
+    EXPECT_GE(measuring, 1u) << "row at h " << h;
   }
 }

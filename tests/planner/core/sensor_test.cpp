@@ -77,6 +77,32 @@ TEST(SensorModel, DesignScanLengthMeetsDensityAtDesignIncidence) {
   EXPECT_EQ(design_scan_length_mm(s, spec, 407.0, 30 * kDeg), s.scan_length_min_mm);
 }
 
+TEST(SensorModel, AimedScanLengthKeepsDensityWhereTheAimIsSeenObliquely) {
+  const SensorModel s = testing::thesis_sensor();
+  const ModelSpec spec = testing::thesis_spec();
+  const Eigen::Matrix3d camera = Eigen::Matrix3d::Identity();  // looking down −z: a facing normal has n.z > 0
+  const double r = 145.0;
+  // Square to the boresight: the design incidence's length, sqrt(1/ρ − δx²)·cos 30°·255, δx = 145·Φx/255/cos 30°.
+  EXPECT_NEAR(aimed_scan_length_mm(s, spec, r, camera, {0, 0, 1}, 30 * kDeg), design_scan_length_mm(s, spec, r, 30 * kDeg), 1e-9);
+  EXPECT_NEAR(design_scan_length_mm(s, spec, r, 30 * kDeg), 140.4118, 1e-3);
+  // 62° in the x-z plane (a face turned to the plate, seen level): δx = 145·0.0018480/cos 62° = 0.57077 mm,
+  // δy = sqrt(0.5 − 0.32578) = 0.41740 mm at cos 30° (y-z plane at the design): L = 0.41740·0.86603·255 = 92.18 mm.
+  const Eigen::Vector3d n_xz(std::sin(62 * kDeg), 0, std::cos(62 * kDeg));
+  const double l_xz = aimed_scan_length_mm(s, spec, r, camera, n_xz, 30 * kDeg);
+  EXPECT_NEAR(l_xz, 92.18, 0.01);
+  EXPECT_NEAR(predicted_density_per_mm2(s, {r, 0.0, 62 * kDeg, 30 * kDeg}, l_xz), spec.density_per_mm2, 1e-9);
+  // The design length there gives 1/(0.32578 + (140.41/255)²) = 1.59 samples/mm²: the view measured nothing of its aim.
+  EXPECT_NEAR(predicted_density_per_mm2(s, {r, 0.0, 62 * kDeg, 0.0}, 140.4118), 1.590, 1e-3);
+  // 62° in the y-z plane: δx at 30° (0.30941 mm), δy = sqrt(0.5 − 0.09573) = 0.63582 mm: L = 0.63582·cos 62°·255 = 76.12 mm.
+  const Eigen::Vector3d n_yz(0, std::sin(62 * kDeg), std::cos(62 * kDeg));
+  EXPECT_NEAR(aimed_scan_length_mm(s, spec, r, camera, n_yz, 30 * kDeg), 76.12, 0.01);
+  // A surface turned away from the view: the design length.
+  EXPECT_NEAR(aimed_scan_length_mm(s, spec, r, camera, {0, 0, -1}, 30 * kDeg), design_scan_length_mm(s, spec, r, 30 * kDeg), 1e-9);
+  // So grazing that no length meets the density: the shortest sweep.
+  const Eigen::Vector3d n_80(std::sin(80 * kDeg), 0, std::cos(80 * kDeg));
+  EXPECT_EQ(aimed_scan_length_mm(s, spec, 300.0, camera, n_80, 30 * kDeg), s.scan_length_min_mm);
+}
+
 TEST(SensorModel, PointTestFrustumFacingAndIncidence) {
   const SensorModel s = testing::thesis_sensor();
   const ModelSpec spec = testing::thesis_spec();
