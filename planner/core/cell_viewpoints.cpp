@@ -51,7 +51,7 @@ struct Placed {
 };
 
 /// The first of `steps` stand-offs, from `seed_standoff` out to `range_cap`, at which the view aimed at
-/// `target` with rotation `rotation(standoff)` and scan length `scan_length(standoff, step)` is reachable
+/// `target` with rotation `rotation(standoff)` and scan length `scan_length(standoff, step, rotation)` is reachable
 /// with the scanner body clear; `reachable` is set when the axes reached any of them. The body's collision
 /// does not depend on the axes, so it is tested first: on the arm every inverse kinematics is a numerical
 /// solve, and colliding stand-offs are solved only to tell "colliding" from "unreachable" when none is kept.
@@ -69,7 +69,7 @@ std::optional<Placed> first_clear_standoff(const CellModel& cell, const Collisio
     if (step > 0 && standoff <= seed_standoff) break;
     const Eigen::Matrix3d r = rotation(standoff);
     const Eigen::Vector3d b = -r.col(2);
-    const double scan = scan_length(standoff, step);
+    const double scan = scan_length(standoff, step, r);
     Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
     pose.linear() = r;
     pose.translation() = target - standoff * b;
@@ -162,7 +162,7 @@ std::vector<Viewpoint> arm_viewpoints(const std::vector<Viewpoint>& seeds, const
         const auto placed = first_clear_standoff(
             cell, checker, target, seed.standoff_mm, range_cap, st.cell_standoff_steps,
             [&](double standoff) { return rotation_at(lowerings[n], standoff); },
-            [&](double standoff, int step) {
+            [&](double standoff, int step, const Eigen::Matrix3d&) {
               return step == 0 ? seed.scan_length_mm : design_scan_length_mm(sensor, spec, standoff, st.scan_length_design_incidence_rad);
             },
             o.reachable);
@@ -246,12 +246,12 @@ Expanded expand_aim(const AimPoint& a, const SensorModel& sensor, const ModelSpe
     bool reachable = false;
     // The bisector's yaw is half the triangulation angle at the stand-off tried.
     auto yaw_at = [&](double standoff) { return yaw_sign * 0.5 * std::atan2(sensor.baseline_mm, standoff); };
-    auto rotation_at = [&](double standoff) { return cell_frame(aim(b0, elevation_at(elev, standoff), yaw_at(standoff)), table_to_object); };
     // The sweep keeps eq. 3.8 at the aim as this view sees it: a clamped or capped elevation sees it obliquely.
     const auto placed = first_clear_standoff(
-        cell, checker, a.point, a.standoff_mm, range_cap, st.cell_standoff_steps, rotation_at,
-        [&](double standoff, int) {
-          return aimed_scan_length_mm(sensor, spec, standoff, rotation_at(standoff), a.normal, st.scan_length_design_incidence_rad);
+        cell, checker, a.point, a.standoff_mm, range_cap, st.cell_standoff_steps,
+        [&](double standoff) { return cell_frame(aim(b0, elevation_at(elev, standoff), yaw_at(standoff)), table_to_object); },
+        [&](double standoff, int, const Eigen::Matrix3d& r) {
+          return aimed_scan_length_mm(sensor, spec, standoff, r, a.normal, st.scan_length_design_incidence_rad);
         },
         reachable);
     if (placed) {

@@ -201,15 +201,25 @@ std::array<long long, 12> Viewpoint::pose_key() const {
   return key;
 }
 
+namespace {
+
+/// The longest sweep whose eq. 3.8 density meets the spec at `range_mm` with the normal's incidence cosines
+/// `c_xz`, `c_yz` (Δx = z Φx / (N_x − 1) / c_xz, Δy = L / (N_y − 1) / c_yz); the shortest allowed when none does.
+double scan_length_at_incidence_mm(const SensorModel& sensor, const ModelSpec& spec, double range_mm, double c_xz, double c_yz) {
+  const double dx = range_mm * sensor.fov_x_rad / (sensor.samples_x - 1) / c_xz;
+  const double dy2 = 1.0 / spec.density_per_mm2 - dx * dx;
+  if (dy2 <= 0.0) return sensor.scan_length_min_mm;
+  const double length = std::sqrt(dy2) * c_yz * (sensor.samples_y - 1);
+  return std::clamp(length, sensor.scan_length_min_mm, sensor.scan_length_max_mm);
+}
+
+}  // namespace
+
 double design_scan_length_mm(const SensorModel& sensor, const ModelSpec& spec, double range_mm,
                              double design_incidence_rad) {
   if (sensor.kind != SensorKind::line_scan) return 0.0;
   const double c = std::cos(design_incidence_rad);
-  const double dx = range_mm * sensor.fov_x_rad / (sensor.samples_x - 1) / c;
-  const double dy2 = 1.0 / spec.density_per_mm2 - dx * dx;
-  if (dy2 <= 0.0) return sensor.scan_length_min_mm;
-  const double length = std::sqrt(dy2) * c * (sensor.samples_y - 1);
-  return std::clamp(length, sensor.scan_length_min_mm, sensor.scan_length_max_mm);
+  return scan_length_at_incidence_mm(sensor, spec, range_mm, c, c);
 }
 
 double aimed_scan_length_mm(const SensorModel& sensor, const ModelSpec& spec, double range_mm, const Eigen::Matrix3d& rotation,
@@ -218,13 +228,8 @@ double aimed_scan_length_mm(const SensorModel& sensor, const ModelSpec& spec, do
   const Eigen::Vector3d n = rotation.transpose() * normal;  // camera frame: a facing surface has n.z > 0
   if (!(n.z() > 0.0)) return design_scan_length_mm(sensor, spec, range_mm, design_incidence_rad);
   const double c = std::cos(design_incidence_rad);
-  const double c_xz = std::min(c, n.z() / std::hypot(n.x(), n.z()));
-  const double c_yz = std::min(c, n.z() / std::hypot(n.y(), n.z()));
-  const double dx = range_mm * sensor.fov_x_rad / (sensor.samples_x - 1) / c_xz;
-  const double dy2 = 1.0 / spec.density_per_mm2 - dx * dx;
-  if (dy2 <= 0.0) return sensor.scan_length_min_mm;
-  const double length = std::sqrt(dy2) * c_yz * (sensor.samples_y - 1);
-  return std::clamp(length, sensor.scan_length_min_mm, sensor.scan_length_max_mm);
+  return scan_length_at_incidence_mm(sensor, spec, range_mm, std::min(c, n.z() / std::hypot(n.x(), n.z())),
+                                     std::min(c, n.z() / std::hypot(n.y(), n.z())));
 }
 
 namespace {
